@@ -1,0 +1,1 @@
+//! Captures: pcap, pcapng and .lvx.

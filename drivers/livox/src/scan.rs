@@ -1,0 +1,333 @@
+//! Assembling point packets into fixed-period scans ready for de-skew.
+//!
+//! Each kept point carries its firing time as an offset from the scan start, so a de-skew stage
+//! can move it to the scan end with the motion in between. Scans start at multiples of the period
+//! on the packets' clock, so scans of two devices on one PTP clock line up.
+
+use crate::data::{DataPacket, GapDetector, Point};
+use serde::{Deserialize, Serialize};
+use starc_time::Stamp;
+
+/// Which returns to keep, by their Livox tag.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TagFilter {
+    /// Keep everything.
+    All,
+    /// FAST-LIO's rule: keep return numbers 0 and 1 (tag & 0x30 is 0x00 or 0x10).
+    #[default]
+    FastLio,
+    /// FAST-LIO's rule and both noise confidences normal (tag & 0x0f == 0).
+    Strict,
+}
+
+impl TagFilter {
+    #[inline]
+    pub fn keeps(self, tag: u8) -> bool {
+        match self {
+            Self::All => true,
+            Self::FastLio => matches!(tag & 0x30, 0x00 | 0x10),
+            Self::Strict => matches!(tag & 0x30, 0x00 | 0x10) && tag & 0x0f == 0,
+        }
+    }
+}
+
+/// Point filters in the style of FAST-LIO's preprocessing (`[scan]` in a config file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanConfig {
+    /// Scan period; 100 ms matches a 10 Hz LIO.
+    pub period_ms: f64,
+    pub tags: TagFilter,
+    /// Points closer than this are dropped (the robot itself, the operator's hands).
+    pub blind_m: f32,
+    /// Points farther than this are dropped (0 disables).
+    pub max_range_m: f32,
+    /// Keep one point in this many (FAST-LIO's point_filter_num); 1 keeps all.
+    pub decimation: u32,
+    /// Keep only lines below this (FAST-LIO's N_SCANS; 6 on the Avia).
+    pub lines: u8,
+}
+
+impl Default for ScanConfig {
+    fn default() -> Self {
+        Self { period_ms: 100.0, tags: TagFilter::FastLio, blind_m: 0.5, max_range_m: 0.0, decimation: 1, lines: 6 }
+    }
+}
+
+impl ScanConfig {
+    /// Checks the values; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1.0..=10_000.0).contains(&self.period_ms) {
+            return Err(format!("scan.period_ms must be within 1..=10000, got {}", self.period_ms));
+        }
+        if self.decimation == 0 {
+            return Err("scan.decimation must be at least 1".into());
+        }
+        if !(self.blind_m >= 0.0) || !(self.max_range_m >= 0.0) {
+            return Err("scan.blind_m and scan.max_range_m must be >= 0".into());
+        }
+        Ok(())
+    }
+
+    pub fn period_ns(&self) -> u64 {
+        (self.period_ms * 1e6).round() as u64
+    }
+}
+
+/// One point of a scan.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ScanPoint {
+    pub x_m: f32,
+    pub y_m: f32,
+    pub z_m: f32,
+    pub reflectivity: u8,
+    pub tag: u8,
+    pub line: u8,
+    /// Firing time after the scan start.
+    pub offset_ns: u32,
+}
+
+/// A scan: all kept points fired in [start, start + period).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Scan {
+    pub start: Stamp,
+    pub period_ns: u64,
+    pub points: Vec<ScanPoint>,
+    /// Point packets that contributed.
+    pub packets: u32,
+    /// Returns seen, empty returns, and returns dropped by the filters.
+    pub returns: u64,
+    pub empty: u64,
+    pub filtered: u64,
+    /// Packets missing inside this scan, from time-stamp gaps.
+    pub lost_packets: u64,
+    /// Host receive time of the last packet, when known.
+    pub last_host_receive: Option<Stamp>,
+}
+
+impl Scan {
+    fn empty_at(start: Stamp, period_ns: u64) -> Self {
+        Self {
+            start,
+            period_ns,
+            points: Vec::new(),
+            packets: 0,
+            returns: 0,
+            empty: 0,
+            filtered: 0,
+            lost_packets: 0,
+            last_host_receive: None,
+        }
+    }
+
+    pub fn end(&self) -> Stamp {
+        Stamp::new(self.start.ns.saturating_add(self.period_ns), self.start.clock)
+    }
+}
+
+/// Turns a stream of point packets of one device into scans.
+#[derive(Debug)]
+pub struct ScanAssembler {
+    config: ScanConfig,
+    period_ns: u64,
+    current: Option<Scan>,
+    decimation_counter: u32,
+    gaps: GapDetector,
+    scratch: Vec<Point>,
+}
+
+impl ScanAssembler {
+    pub fn new(config: ScanConfig) -> Result<Self, String> {
+        config.validate()?;
+        let period_ns = config.period_ns();
+        Ok(Self { config, period_ns, current: None, decimation_counter: 0, gaps: GapDetector::new(), scratch: Vec::new() })
+    }
+
+    pub fn config(&self) -> &ScanConfig {
+        &self.config
+    }
+
+    fn aligned_start(&self, t: Stamp) -> Stamp {
+        Stamp::new(t.ns - t.ns % self.period_ns, t.clock)
+    }
+
+    /// Adds a point packet (IMU packets are ignored) and appends finished scans to `done`.
+    pub fn push(&mut self, packet: &DataPacket<'_>, host_receive: Option<Stamp>, done: &mut Vec<Scan>) {
+        if packet.is_imu() {
+            return;
+        }
+        let stamp = packet.header.timestamp;
+        let gap = self.gaps.observe(stamp, packet.header.data_type.packet_interval_ns());
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        let counts = packet.decode_points(&mut scratch);
+        let first_ns = stamp.ns;
+        let mut counted_packet = false;
+        for p in &scratch {
+            let t = Stamp::new(first_ns.saturating_add(u64::from(p.offset_ns)), stamp.clock);
+            self.roll_over(t, done);
+            let Some(scan) = self.current.as_mut() else { continue };
+            if !counted_packet {
+                scan.packets += 1;
+                scan.returns += u64::from(counts.returns);
+                scan.empty += u64::from(counts.empty);
+                scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
+                counted_packet = true;
+            }
+            scan.last_host_receive = host_receive.or(scan.last_host_receive);
+            if !keep(&self.config, p, &mut self.decimation_counter) {
+                scan.filtered += 1;
+                continue;
+            }
+            scan.points.push(ScanPoint {
+                x_m: p.x_m,
+                y_m: p.y_m,
+                z_m: p.z_m,
+                reflectivity: p.reflectivity,
+                tag: p.tag,
+                line: p.line,
+                offset_ns: (t.ns - scan.start.ns) as u32,
+            });
+        }
+        if !counted_packet {
+            // A packet of empty returns still counts towards the scan it fell in.
+            self.roll_over(stamp, done);
+            if let Some(scan) = self.current.as_mut() {
+                scan.packets += 1;
+                scan.returns += u64::from(counts.returns);
+                scan.empty += u64::from(counts.empty);
+                scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
+                scan.last_host_receive = host_receive.or(scan.last_host_receive);
+            }
+        }
+        self.scratch = scratch;
+    }
+
+    /// Makes `t` fall inside the current scan, finishing scans as time passes them.
+    fn roll_over(&mut self, t: Stamp, done: &mut Vec<Scan>) {
+        if let Some(scan) = &self.current {
+            let inside = scan.start.clock == t.clock && t.ns >= scan.start.ns && t.ns - scan.start.ns < self.period_ns;
+            if inside {
+                return;
+            }
+            let next_is_contiguous = scan.start.clock == t.clock
+                && t.ns >= scan.start.ns + self.period_ns
+                && t.ns - scan.start.ns < 2 * self.period_ns;
+            if t.clock == scan.start.clock && t.ns < scan.start.ns {
+                // A late (reordered) point from the previous scan: keep it out of this one.
+                return;
+            }
+            if let Some(finished) = self.current.take() {
+                done.push(finished);
+            }
+            if next_is_contiguous {
+                let start = Stamp::new(self.aligned_start(t).ns, t.clock);
+                self.current = Some(Scan::empty_at(start, self.period_ns));
+                return;
+            }
+        }
+        self.current = Some(Scan::empty_at(self.aligned_start(t), self.period_ns));
+    }
+
+    /// Finishes the scan in progress (end of a capture or a stop).
+    pub fn finish(&mut self) -> Option<Scan> {
+        self.current.take()
+    }
+
+    pub fn lost_packets(&self) -> u64 {
+        self.gaps.lost_packets
+    }
+}
+
+#[inline]
+fn keep(config: &ScanConfig, p: &Point, decimation_counter: &mut u32) -> bool {
+    if p.line >= config.lines || !config.tags.keeps(p.tag) {
+        return false;
+    }
+    let r2 = p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m;
+    if r2 < config.blind_m * config.blind_m {
+        return false;
+    }
+    if config.max_range_m > 0.0 && r2 > config.max_range_m * config.max_range_m {
+        return false;
+    }
+    *decimation_counter = decimation_counter.wrapping_add(1);
+    (*decimation_counter - 1) % config.decimation == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::{encode_point_packet, DataHeader, DataType, Return, StatusWord};
+    use starc_time::Clock;
+
+    fn packet_bytes(ts_ns: u64, tag: u8, x_m: f32) -> Vec<u8> {
+        let h = DataHeader {
+            version: 5,
+            slot: 1,
+            lidar_id: 1,
+            status: StatusWord::from_raw(0),
+            data_type: DataType::ExtendedCartesian,
+            timestamp: Stamp::new(ts_ns, Clock::Ptp),
+        };
+        let returns = vec![Return { x_m, y_m: x_m / 3.0, z_m: x_m / 6.0, reflectivity: 10, tag }; 96];
+        let mut out = Vec::new();
+        let _ = encode_point_packet(&h, &returns, &mut out);
+        out
+    }
+
+    fn run(config: ScanConfig, packets: &[Vec<u8>]) -> Vec<Scan> {
+        let Ok(mut a) = ScanAssembler::new(config) else { return Vec::new() };
+        let mut done = Vec::new();
+        for b in packets {
+            if let Ok(p) = DataPacket::parse(b) {
+                a.push(&p, None, &mut done);
+            }
+        }
+        done.extend(a.finish());
+        done
+    }
+
+    #[test]
+    fn one_second_of_packets_makes_ten_scans_with_offsets_inside_the_period() {
+        let packets: Vec<Vec<u8>> = (0..2500).map(|i| packet_bytes(5_000_000_000 + i * 400_008, 0, 3.0)).collect();
+        let scans = run(ScanConfig::default(), &packets);
+        assert_eq!(scans.len(), 11);
+        let total: usize = scans.iter().map(|s| s.points.len()).sum();
+        assert_eq!(total, 2500 * 96);
+        for s in &scans {
+            assert_eq!(s.start.ns % 100_000_000, 0);
+            assert!(s.points.iter().all(|p| u64::from(p.offset_ns) < s.period_ns));
+            assert!(s.points.windows(2).all(|w| w[0].offset_ns <= w[1].offset_ns));
+        }
+        let full = scans[1].points.len();
+        assert!((24_000 - 96..=24_000 + 96).contains(&full), "a full scan holds {full} points");
+    }
+
+    #[test]
+    fn filters_blind_tags_and_decimation() {
+        let near = vec![packet_bytes(0, 0, 0.1)];
+        assert_eq!(run(ScanConfig::default(), &near)[0].points.len(), 0);
+        let noisy = vec![packet_bytes(0, 0x20, 3.0)];
+        let s = &run(ScanConfig::default(), &noisy)[0];
+        assert_eq!((s.points.len(), s.filtered), (0, 96));
+        let all = ScanConfig { tags: TagFilter::All, decimation: 3, ..ScanConfig::default() };
+        assert_eq!(run(all, &noisy)[0].points.len(), 32);
+    }
+
+    #[test]
+    fn lost_packets_are_counted_in_their_scan() {
+        let packets: Vec<Vec<u8>> =
+            (0..100u64).filter(|i| *i != 50 && *i != 51).map(|i| packet_bytes(i * 400_000, 0, 3.0)).collect();
+        let scans = run(ScanConfig::default(), &packets);
+        assert_eq!(scans.iter().map(|s| s.lost_packets).sum::<u64>(), 2);
+    }
+
+    #[test]
+    fn bad_configs_are_refused() {
+        assert!(ScanAssembler::new(ScanConfig { decimation: 0, ..ScanConfig::default() }).is_err());
+        assert!(ScanAssembler::new(ScanConfig { period_ms: 0.1, ..ScanConfig::default() }).is_err());
+        assert!(ScanAssembler::new(ScanConfig { blind_m: f32::NAN, ..ScanConfig::default() }).is_err());
+    }
+}
