@@ -1,1 +1,62 @@
-fn main() {}
+//! `starc`: the one command-line program of STARC.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "starc", version, about = "STARC: see people behind walls (drivers, mock devices, pipeline)")]
+struct Cli {
+    /// Log filter in RUST_LOG syntax (also read from RUST_LOG).
+    #[arg(long, global = true, default_value = "info")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run an Avia mock device and the live driver against each other on loopback (the main job
+    /// until the simulated mission exists).
+    Demo(cmd::demo::Args),
+    /// List the Livox devices on the network.
+    Devices(cmd::devices::Args),
+    /// Livox device tools.
+    #[command(subcommand)]
+    Livox(cmd::livox::Command),
+    /// Mock devices that speak the real wire protocols.
+    #[command(subcommand)]
+    Mock(cmd::mock::Command),
+    /// Summarize a capture (pcap, pcapng, .lvx) of Livox traffic.
+    Inspect(cmd::inspect::Args),
+    /// Send a capture's packets to a UDP socket with their original timing.
+    Replay(cmd::replay::Args),
+    /// Write the scans of a capture as point-cloud files.
+    Export(cmd::export::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| cli.log.clone());
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::new(filter))
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match cli.command {
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Devices(a) => cmd::devices::run(a),
+        Command::Livox(c) => cmd::livox::run(c),
+        Command::Mock(c) => cmd::mock::run(c),
+        Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Replay(a) => cmd::replay::run(a),
+        Command::Export(a) => cmd::export::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -141,7 +141,14 @@ impl ScanAssembler {
     pub fn new(config: ScanConfig) -> Result<Self, String> {
         config.validate()?;
         let period_ns = config.period_ns();
-        Ok(Self { config, period_ns, current: None, decimation_counter: 0, gaps: GapDetector::new(), scratch: Vec::new() })
+        Ok(Self {
+            config,
+            period_ns,
+            current: None,
+            decimation_counter: 0,
+            gaps: GapDetector::new(),
+            scratch: Vec::new(),
+        })
     }
 
     pub fn config(&self) -> &ScanConfig {

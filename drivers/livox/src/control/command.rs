@@ -267,13 +267,33 @@ pub enum Request {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(tag = "command", rename_all = "snake_case")]
 pub enum Response {
-    QueryDeviceInfo { ret: u8, firmware: [u8; 4] },
-    Heartbeat { ret: u8, work_state: u8, feature: u8, status: u32 },
-    ReadExtrinsics { ret: u8, extrinsics: Extrinsics },
-    GetReturnMode { ret: u8, mode: ReturnMode },
-    GetImuPush { ret: u8, enabled: bool },
+    QueryDeviceInfo {
+        ret: u8,
+        firmware: [u8; 4],
+    },
+    Heartbeat {
+        ret: u8,
+        work_state: u8,
+        feature: u8,
+        status: u32,
+    },
+    ReadExtrinsics {
+        ret: u8,
+        extrinsics: Extrinsics,
+    },
+    GetReturnMode {
+        ret: u8,
+        mode: ReturnMode,
+    },
+    GetImuPush {
+        ret: u8,
+        enabled: bool,
+    },
     /// Commands whose ACK is a bare return code.
-    Ret { id: CommandId, ret: u8 },
+    Ret {
+        id: CommandId,
+        ret: u8,
+    },
 }
 
 impl Response {
@@ -684,7 +704,14 @@ mod tests {
             Request::Disconnect,
             Request::SetMode { mode: LidarMode::PowerSave },
             Request::WriteExtrinsics {
-                extrinsics: Extrinsics { roll_deg: 1.5, pitch_deg: -2.0, yaw_deg: 90.0, x_mm: 10, y_mm: -20, z_mm: 300 },
+                extrinsics: Extrinsics {
+                    roll_deg: 1.5,
+                    pitch_deg: -2.0,
+                    yaw_deg: 90.0,
+                    x_mm: 10,
+                    y_mm: -20,
+                    z_mm: 300,
+                },
             },
             Request::ReadExtrinsics,
             Request::SetReturnMode { mode: ReturnMode::Triple },

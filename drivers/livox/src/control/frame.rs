@@ -72,12 +72,8 @@ impl<'a> RawFrame<'a> {
             return Err(LivoxError::BadHeaderCrc { stored: stored16, computed: computed16 });
         }
         let body_end = bytes.len() - CRC32_LEN;
-        let stored32 = u32::from_le_bytes([
-            bytes[body_end],
-            bytes[body_end + 1],
-            bytes[body_end + 2],
-            bytes[body_end + 3],
-        ]);
+        let stored32 =
+            u32::from_le_bytes([bytes[body_end], bytes[body_end + 1], bytes[body_end + 2], bytes[body_end + 3]]);
         let computed32 = crc32(&bytes[..body_end]);
         if stored32 != computed32 {
             return Err(LivoxError::BadFrameCrc { stored: stored32, computed: computed32 });
@@ -125,9 +121,7 @@ mod tests {
     use super::*;
 
     fn frame(payload: &[u8]) -> Vec<u8> {
-        RawFrame { cmd_type: CmdType::Cmd, seq: 7, cmd_set: 0, cmd_id: 3, payload }
-            .encode()
-            .unwrap_or_default()
+        RawFrame { cmd_type: CmdType::Cmd, seq: 7, cmd_set: 0, cmd_id: 3, payload }.encode().unwrap_or_default()
     }
 
     #[test]

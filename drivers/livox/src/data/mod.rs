@@ -7,7 +7,7 @@ pub mod timestamp;
 
 pub use gaps::{Gap, GapDetector};
 pub use packet::{
-    encode_imu_packet, encode_point_packet, packet_len_for, DataHeader, DataPacket, DataType, ImuSample, Point,
-    Return, ReturnCounts,
+    encode_imu_packet, encode_point_packet, packet_len_for, DataHeader, DataPacket, DataType, ImuSample, Point, Return,
+    ReturnCounts,
 };
 pub use status::{StatusWord, SyncState, SystemStatus};

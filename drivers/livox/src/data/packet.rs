@@ -330,7 +330,18 @@ impl<'a> DataPacket<'a> {
                     for e in 0..echoes {
                         let o = 4 + e * 6;
                         let depth = le_u32(f, o);
-                        push_spherical(out, &mut empty, depth, theta, phi, f[o + 4], f[o + 5], line, e as u8, offset_ns);
+                        push_spherical(
+                            out,
+                            &mut empty,
+                            depth,
+                            theta,
+                            phi,
+                            f[o + 4],
+                            f[o + 5],
+                            line,
+                            e as u8,
+                            offset_ns,
+                        );
                     }
                 }
                 DataType::Imu => {}
@@ -365,7 +376,16 @@ impl<'a> DataPacket<'a> {
 
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn push_cartesian(out: &mut Vec<Point>, empty: &mut u32, f: &[u8], o: usize, tag: u8, line: u8, echo: u8, offset_ns: u32) {
+fn push_cartesian(
+    out: &mut Vec<Point>,
+    empty: &mut u32,
+    f: &[u8],
+    o: usize,
+    tag: u8,
+    line: u8,
+    echo: u8,
+    offset_ns: u32,
+) {
     let (x, y, z) = (le_i32(f, o), le_i32(f, o + 4), le_i32(f, o + 8));
     if x == 0 && y == 0 && z == 0 {
         *empty += 1;
@@ -452,10 +472,7 @@ pub fn encode_point_packet(header: &DataHeader, returns: &[Return], out: &mut Ve
     header.encode_into(out)?;
     for firing in returns.chunks_exact(dt.echoes()) {
         match dt {
-            DataType::Cartesian
-            | DataType::ExtendedCartesian
-            | DataType::DualCartesian
-            | DataType::TripleCartesian => {
+            DataType::Cartesian | DataType::ExtendedCartesian | DataType::DualCartesian | DataType::TripleCartesian => {
                 for r in firing {
                     for v in [r.x_m, r.y_m, r.z_m] {
                         out.extend_from_slice(&Return::mm(v).to_le_bytes());
@@ -565,14 +582,15 @@ mod tests {
             let expect_empty = input.iter().filter(|r| **r == Return::EMPTY).count() as u32;
             assert_eq!(counts, ReturnCounts { returns: input.len() as u32, empty: expect_empty }, "{dt:?}");
             assert_eq!(packet.count_returns(), counts, "{dt:?}");
-            let kept: Vec<(usize, &Return)> =
-                input.iter().enumerate().filter(|(_, r)| **r != Return::EMPTY).collect();
+            let kept: Vec<(usize, &Return)> = input.iter().enumerate().filter(|(_, r)| **r != Return::EMPTY).collect();
             assert_eq!(points.len(), kept.len());
             let tol = if dt.is_spherical() { 0.02 } else { 0.0006 };
             for (p, (i, r)) in points.iter().zip(kept) {
                 let firing = i / dt.echoes();
-                assert!((p.x_m - r.x_m).abs() < tol && (p.y_m - r.y_m).abs() < tol && (p.z_m - r.z_m).abs() < tol,
-                    "{dt:?} return {i}: {p:?} vs {r:?}");
+                assert!(
+                    (p.x_m - r.x_m).abs() < tol && (p.y_m - r.y_m).abs() < tol && (p.z_m - r.z_m).abs() < tol,
+                    "{dt:?} return {i}: {p:?} vs {r:?}"
+                );
                 assert_eq!(p.offset_ns, firing as u32 * dt.firing_interval_ns());
                 assert_eq!(p.echo as usize, i % dt.echoes());
                 let mid = matches!(dt, DataType::Cartesian | DataType::Spherical);

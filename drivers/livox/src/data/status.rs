@@ -104,9 +104,12 @@ impl StatusWord {
             2 => "error",
             _ => "abnormal",
         };
-        for (name, v) in
-            [("temperature", self.temperature), ("voltage", self.voltage), ("motor", self.motor), ("window dirty", self.dirty)]
-        {
+        for (name, v) in [
+            ("temperature", self.temperature),
+            ("voltage", self.voltage),
+            ("motor", self.motor),
+            ("window dirty", self.dirty),
+        ] {
             if v != 0 {
                 problems.push(format!("{name} {}", level(v)));
             }

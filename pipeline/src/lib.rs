@@ -1,0 +1,9 @@
+//! The STARC pipeline. It works on decoded, timed data and knows no sockets, serial ports or
+//! mock devices.
+//!
+//! - [`cloud`]: point clouds and their files (PCD, PLY, KITTI .bin).
+
+pub mod cloud;
+pub mod error;
+
+pub use error::PipelineError;

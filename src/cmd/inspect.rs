@@ -1,0 +1,8 @@
+//! `starc inspect` (being written).
+
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("starc inspect is being written")
+}
