@@ -1,1 +1,13 @@
-//! Mock devices.
+//! Hardware in the loop for STARC: mock devices that speak the real wire protocols.
+//!
+//! - [`avia`]: a Livox Avia (SDK1) that broadcasts, handshakes, answers every control command and
+//!   streams point and IMU packets at the real rates, from a synthetic scene or a capture file,
+//!   with injectable faults. A sans-IO core ([`avia::AviaDevice`]) and a tokio transport
+//!   ([`avia::MockAvia`]).
+//! - [`rng`]: the small deterministic PRNG behind every seeded choice.
+
+pub mod avia;
+pub mod error;
+pub mod rng;
+
+pub use error::{HilError, Result};

@@ -7,4 +7,28 @@ pub enum PipelineError {
     Io { context: String, source: std::io::Error },
     #[error("{format} file: {reason}")]
     BadFile { format: &'static str, reason: String },
+    /// A header line that cannot be understood (`line` counts from 1).
+    #[error("{format} header, line {line}: {reason}")]
+    BadHeader { format: &'static str, line: usize, reason: String },
+    /// A field the reader cannot do without (x, y or z).
+    #[error("{format} file: no {field} field")]
+    MissingField { format: &'static str, field: &'static str },
+    /// The header promises more data than the file holds.
+    #[error("{format} file: {what} needs {need} bytes, {have} left")]
+    Truncated { format: &'static str, what: &'static str, need: u64, have: u64 },
+    /// A value of the data section that does not parse (`index` counts points from 0).
+    #[error("{format} file, point {index}: {reason}")]
+    BadPoint { format: &'static str, index: u64, reason: String },
+    /// A valid file using a feature this reader does not implement.
+    #[error("{format} file: {what} is not supported")]
+    Unsupported { format: &'static str, what: String },
+    /// Neither the first bytes nor the file name tell the point-cloud format.
+    #[error("{path}: unknown point-cloud format (expected .pcd, .ply or KITTI .bin)")]
+    UnknownFormat { path: String },
+}
+
+impl PipelineError {
+    pub fn io(context: impl Into<String>, source: std::io::Error) -> Self {
+        Self::Io { context: context.into(), source }
+    }
 }

@@ -6,4 +6,10 @@ pub mod export;
 pub mod inspect;
 pub mod livox;
 pub mod mock;
+pub mod rates;
 pub mod replay;
+
+/// The tokio runtime every async subcommand runs on; two workers match the target machines.
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?)
+}

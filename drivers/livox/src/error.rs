@@ -39,10 +39,36 @@ pub enum LivoxError {
     UnsupportedLinkType(u32),
     #[error("lvx: {0}")]
     Lvx(String),
+    #[error("capture: first bytes {0:02x?} are not pcap, pcapng or .lvx")]
+    UnknownCaptureFormat(Vec<u8>),
+    #[error("{format}: file ends inside a record at byte {offset}: need {need} bytes, have {have}")]
+    CaptureTruncated { format: &'static str, offset: u64, need: usize, have: usize },
+    #[error("{format}: record at byte {offset} claims {len} bytes, more than the {max}-byte limit")]
+    RecordTooLarge { format: &'static str, offset: u64, len: u64, max: usize },
+    #[error("{format}: unsupported version {major}.{minor}")]
+    UnsupportedCaptureVersion { format: &'static str, major: u16, minor: u16 },
+    #[error("pcapng: block {block_type:#010x} at byte {offset}: {reason}")]
+    BadBlock { offset: u64, block_type: u32, reason: &'static str },
+    #[error("pcapng: packet at byte {offset} names interface {interface}, the section has {known}")]
+    UnknownInterface { offset: u64, interface: u32, known: usize },
+    #[error("{format}: malformed at byte {offset}: {reason}")]
+    MalformedCapture { format: &'static str, offset: u64, reason: &'static str },
+    #[error("lvx: package at byte {offset} has unknown data_type {data_type}")]
+    LvxDataType { offset: u64, data_type: u8 },
+    #[error("lvx: frame at byte {offset}: {reason} (header says current {current}, next {next})")]
+    LvxFrame { offset: u64, current: u64, next: u64, reason: &'static str },
+    #[error("lvx: device index {0} is not in the file's device list")]
+    LvxUnknownDevice(u8),
+    #[error("capture writer: {what} of {len} bytes exceeds {max}")]
+    TooLarge { what: &'static str, len: usize, max: usize },
+    #[error("capture writer: datagram without {0} address")]
+    MissingAddress(&'static str),
     #[error("{context}: {source}")]
     Io { context: String, source: std::io::Error },
     #[error("device {0} did not answer")]
     Timeout(String),
+    #[error("configuration: {0}")]
+    BadConfig(String),
     #[error("device refused {command}: return code {ret}")]
     Refused { command: &'static str, ret: u8 },
 }

@@ -64,7 +64,7 @@ impl ScanConfig {
         if self.decimation == 0 {
             return Err("scan.decimation must be at least 1".into());
         }
-        if !(self.blind_m >= 0.0) || !(self.max_range_m >= 0.0) {
+        if self.blind_m.is_nan() || self.max_range_m.is_nan() || self.blind_m < 0.0 || self.max_range_m < 0.0 {
             return Err("scan.blind_m and scan.max_range_m must be >= 0".into());
         }
         Ok(())
@@ -135,6 +135,8 @@ pub struct ScanAssembler {
     decimation_counter: u32,
     gaps: GapDetector,
     scratch: Vec<Point>,
+    late: bool,
+    late_points: u64,
 }
 
 impl ScanAssembler {
@@ -148,6 +150,8 @@ impl ScanAssembler {
             decimation_counter: 0,
             gaps: GapDetector::new(),
             scratch: Vec::new(),
+            late: false,
+            late_points: 0,
         })
     }
 
@@ -174,6 +178,10 @@ impl ScanAssembler {
         for p in &scratch {
             let t = Stamp::new(first_ns.saturating_add(u64::from(p.offset_ns)), stamp.clock);
             self.roll_over(t, done);
+            if std::mem::take(&mut self.late) {
+                self.late_points += 1;
+                continue;
+            }
             let Some(scan) = self.current.as_mut() else { continue };
             if !counted_packet {
                 scan.packets += 1;
@@ -200,7 +208,8 @@ impl ScanAssembler {
         if !counted_packet {
             // A packet of empty returns still counts towards the scan it fell in.
             self.roll_over(stamp, done);
-            if let Some(scan) = self.current.as_mut() {
+            let late = std::mem::take(&mut self.late);
+            if let Some(scan) = self.current.as_mut().filter(|_| !late) {
                 scan.packets += 1;
                 scan.returns += u64::from(counts.returns);
                 scan.empty += u64::from(counts.empty);
@@ -221,8 +230,9 @@ impl ScanAssembler {
             let next_is_contiguous = scan.start.clock == t.clock
                 && t.ns >= scan.start.ns + self.period_ns
                 && t.ns - scan.start.ns < 2 * self.period_ns;
-            if t.clock == scan.start.clock && t.ns < scan.start.ns {
+            if t.clock == scan.start.clock && t.ns < scan.start.ns && scan.start.ns - t.ns <= self.period_ns {
                 // A late (reordered) point from the previous scan: keep it out of this one.
+                self.late = true;
                 return;
             }
             if let Some(finished) = self.current.take() {
@@ -245,6 +255,11 @@ impl ScanAssembler {
     pub fn lost_packets(&self) -> u64 {
         self.gaps.lost_packets
     }
+
+    /// Points that arrived after their scan was finished (reordered packets); they are dropped.
+    pub fn late_points(&self) -> u64 {
+        self.late_points
+    }
 }
 
 #[inline]
@@ -260,7 +275,7 @@ fn keep(config: &ScanConfig, p: &Point, decimation_counter: &mut u32) -> bool {
         return false;
     }
     *decimation_counter = decimation_counter.wrapping_add(1);
-    (*decimation_counter - 1) % config.decimation == 0
+    (*decimation_counter - 1).is_multiple_of(config.decimation)
 }
 
 #[cfg(test)]
@@ -329,6 +344,18 @@ mod tests {
             (0..100u64).filter(|i| *i != 50 && *i != 51).map(|i| packet_bytes(i * 400_000, 0, 3.0)).collect();
         let scans = run(ScanConfig::default(), &packets);
         assert_eq!(scans.iter().map(|s| s.lost_packets).sum::<u64>(), 2);
+    }
+
+    #[test]
+    fn a_wild_time_stamp_costs_at_most_its_own_scans() {
+        let mut packets: Vec<Vec<u8>> = (0..500u64).map(|i| packet_bytes(i * 400_000, 0, 3.0)).collect();
+        packets[100] = packet_bytes(u64::MAX / 2, 0, 3.0);
+        packets[300] = packet_bytes(3, 0, 3.0);
+        let scans = run(ScanConfig::default(), &packets);
+        let total: usize = scans.iter().map(|s| s.points.len()).sum();
+        // Everything but the packet stamped at 3 ns (late for the scan in progress) is kept.
+        assert_eq!(total, 499 * 96);
+        assert!(scans.iter().filter(|s| s.points.len() > 20_000).count() >= 1);
     }
 
     #[test]

@@ -14,7 +14,11 @@ pub struct Gap {
 }
 
 /// Watches one stream (points or IMU of one device). A gap longer than 1.8 expected intervals
-/// means lost packets; a stamp that goes backwards is counted as reordered, not as a gap.
+/// means lost packets; a stamp that goes backwards is counted as reordered, not as a gap. A jump
+/// of more than [`CLOCK_JUMP_NS`] either way (a resynchronised clock, a corrupted stamp) is
+/// counted as a clock jump and restarts the watch, so one bad stamp cannot poison the rest.
+pub const CLOCK_JUMP_NS: u64 = 1_000_000_000;
+
 #[derive(Clone, Debug, Default)]
 pub struct GapDetector {
     last: Option<Stamp>,
@@ -23,6 +27,7 @@ pub struct GapDetector {
     pub gaps: u64,
     pub reordered: u64,
     pub clock_changes: u64,
+    pub clock_jumps: u64,
 }
 
 impl GapDetector {
@@ -41,13 +46,19 @@ impl GapDetector {
             self.last = Some(stamp);
             return None;
         }
+        if stamp.ns.abs_diff(last.ns) > CLOCK_JUMP_NS {
+            self.clock_jumps += 1;
+            self.last = Some(stamp);
+            return None;
+        }
         if stamp.ns < last.ns {
             self.reordered += 1;
             return None;
         }
         self.last = Some(stamp);
         let gap_ns = stamp.ns - last.ns;
-        if expected_interval_ns == 0 || gap_ns * 10 <= expected_interval_ns * 18 {
+        // gap_ns <= CLOCK_JUMP_NS, so the products below cannot overflow for any sane interval.
+        if expected_interval_ns == 0 || u128::from(gap_ns) * 10 <= u128::from(expected_interval_ns) * 18 {
             return None;
         }
         let lost = (gap_ns + expected_interval_ns / 2) / expected_interval_ns - 1;
@@ -70,6 +81,21 @@ mod tests {
             d.observe(ts(n), 400_000);
         }
         assert_eq!((d.gaps, d.lost_packets, d.packets), (2, 3, 6));
+    }
+
+    #[test]
+    fn a_wild_stamp_is_a_clock_jump_and_the_watch_recovers() {
+        let mut d = GapDetector::new();
+        let ts = |n: u64| Stamp::new(n * 400_000, Clock::Ptp);
+        d.observe(ts(0), 400_000);
+        d.observe(ts(1), 400_000);
+        d.observe(Stamp::new(u64::MAX - 5, Clock::Ptp), 400_000);
+        for n in 2..10 {
+            d.observe(ts(n), 400_000);
+        }
+        assert_eq!((d.gaps, d.lost_packets, d.reordered, d.clock_jumps), (0, 0, 0, 2));
+        d.observe(ts(12), u64::MAX);
+        d.observe(ts(13), 0);
     }
 
     #[test]

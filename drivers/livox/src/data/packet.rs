@@ -299,54 +299,22 @@ impl<'a> DataPacket<'a> {
         if dt == DataType::Imu {
             return ReturnCounts::default();
         }
-        let echoes = dt.echoes();
-        let firing_size = dt.firing_size();
-        let interval = dt.firing_interval_ns();
-        let mid = matches!(dt, DataType::Cartesian | DataType::Spherical);
         let before = out.len();
         out.reserve(dt.returns_per_packet());
-        let mut empty = 0u32;
-        for (k, f) in self.body.chunks_exact(firing_size).enumerate() {
-            let offset_ns = k as u32 * interval;
-            let line = if mid { 0 } else { (k % usize::from(AVIA_LINES)) as u8 };
-            match dt {
-                DataType::Cartesian | DataType::ExtendedCartesian => {
-                    let tag = if dt == DataType::Cartesian { 0 } else { f[13] };
-                    push_cartesian(out, &mut empty, f, 0, tag, line, 0, offset_ns);
-                }
-                DataType::DualCartesian | DataType::TripleCartesian => {
-                    for e in 0..echoes {
-                        let o = e * 14;
-                        push_cartesian(out, &mut empty, &f[o..o + 14], 0, f[o + 13], line, e as u8, offset_ns);
-                    }
-                }
-                DataType::Spherical | DataType::ExtendedSpherical => {
-                    let depth = le_u32(f, 0);
-                    let tag = if dt == DataType::Spherical { 0 } else { f[9] };
-                    push_spherical(out, &mut empty, depth, le_u16(f, 4), le_u16(f, 6), f[8], tag, line, 0, offset_ns);
-                }
-                DataType::DualSpherical | DataType::TripleSpherical => {
-                    let (theta, phi) = (le_u16(f, 0), le_u16(f, 2));
-                    for e in 0..echoes {
-                        let o = 4 + e * 6;
-                        let depth = le_u32(f, o);
-                        push_spherical(
-                            out,
-                            &mut empty,
-                            depth,
-                            theta,
-                            phi,
-                            f[o + 4],
-                            f[o + 5],
-                            line,
-                            e as u8,
-                            offset_ns,
-                        );
-                    }
-                }
-                DataType::Imu => {}
-            }
-        }
+        let interval = dt.firing_interval_ns();
+        let body = self.body;
+        // One loop per data type, with the firing layout known at compile time.
+        let empty = match dt {
+            DataType::Cartesian => decode_cartesian::<13, 1, false>(body, interval, out),
+            DataType::ExtendedCartesian => decode_cartesian::<14, 1, true>(body, interval, out),
+            DataType::DualCartesian => decode_cartesian::<28, 2, true>(body, interval, out),
+            DataType::TripleCartesian => decode_cartesian::<42, 3, true>(body, interval, out),
+            DataType::Spherical => decode_spherical::<9, false>(body, interval, out),
+            DataType::ExtendedSpherical => decode_spherical::<10, true>(body, interval, out),
+            DataType::DualSpherical => decode_multi_spherical::<16, 2>(body, interval, out),
+            DataType::TripleSpherical => decode_multi_spherical::<22, 3>(body, interval, out),
+            DataType::Imu => 0,
+        };
         ReturnCounts { returns: (out.len() - before) as u32 + empty, empty }
     }
 
@@ -372,6 +340,88 @@ impl<'a> DataPacket<'a> {
         }
         ReturnCounts { returns: dt.returns_per_packet() as u32, empty }
     }
+}
+
+/// The line after `line` on the Avia's six.
+#[inline(always)]
+fn next_line(line: u8) -> u8 {
+    if line + 1 == AVIA_LINES {
+        0
+    } else {
+        line + 1
+    }
+}
+
+/// Cartesian firings of `SIZE` bytes holding `ECHOES` returns of 14 bytes (13 without a tag);
+/// `EXTENDED` types carry a tag and cycle through the Avia's lines, Mid types (type 0) do not.
+/// Returns the number of empty returns.
+#[inline(always)]
+fn decode_cartesian<const SIZE: usize, const ECHOES: usize, const EXTENDED: bool>(
+    body: &[u8],
+    interval: u32,
+    out: &mut Vec<Point>,
+) -> u32 {
+    let mut empty = 0u32;
+    let mut line = 0u8;
+    for (k, f) in body.chunks_exact(SIZE).enumerate() {
+        let Ok(f) = <&[u8; SIZE]>::try_from(f) else { continue };
+        let offset_ns = k as u32 * interval;
+        for e in 0..ECHOES {
+            let o = e * 14;
+            // Mid type 0 has no tag byte; `get` keeps the untaken branch free of a panic path.
+            let tag = if EXTENDED { f.get(o + 13).copied().unwrap_or(0) } else { 0 };
+            push_cartesian(out, &mut empty, f, o, tag, line, e as u8, offset_ns);
+        }
+        if EXTENDED {
+            line = next_line(line);
+        }
+    }
+    empty
+}
+
+/// Single-return spherical firings (types 1 and 3): depth u32, theta u16, phi u16, reflectivity,
+/// and a tag when `EXTENDED` (type 3, which also cycles through the Avia's lines).
+#[inline(always)]
+fn decode_spherical<const SIZE: usize, const EXTENDED: bool>(body: &[u8], interval: u32, out: &mut Vec<Point>) -> u32 {
+    let table = trig_table();
+    let mut empty = 0u32;
+    let mut line = 0u8;
+    for (k, f) in body.chunks_exact(SIZE).enumerate() {
+        let Ok(f) = <&[u8; SIZE]>::try_from(f) else { continue };
+        let offset_ns = k as u32 * interval;
+        let tag = if EXTENDED { f.get(9).copied().unwrap_or(0) } else { 0 };
+        let depth = le_u32(f, 0);
+        push_spherical(out, &mut empty, table, depth, le_u16(f, 4), le_u16(f, 6), f[8], tag, line, 0, offset_ns);
+        if EXTENDED {
+            line = next_line(line);
+        }
+    }
+    empty
+}
+
+/// Multi-return spherical firings (types 5 and 8): theta u16, phi u16, then per return depth u32,
+/// reflectivity, tag.
+#[inline(always)]
+fn decode_multi_spherical<const SIZE: usize, const ECHOES: usize>(
+    body: &[u8],
+    interval: u32,
+    out: &mut Vec<Point>,
+) -> u32 {
+    let table = trig_table();
+    let mut empty = 0u32;
+    let mut line = 0u8;
+    for (k, f) in body.chunks_exact(SIZE).enumerate() {
+        let Ok(f) = <&[u8; SIZE]>::try_from(f) else { continue };
+        let offset_ns = k as u32 * interval;
+        let (theta, phi) = (le_u16(f, 0), le_u16(f, 2));
+        for e in 0..ECHOES {
+            let o = 4 + e * 6;
+            let depth = le_u32(f, o);
+            push_spherical(out, &mut empty, table, depth, theta, phi, f[o + 4], f[o + 5], line, e as u8, offset_ns);
+        }
+        line = next_line(line);
+    }
+    empty
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -408,6 +458,7 @@ fn push_cartesian(
 fn push_spherical(
     out: &mut Vec<Point>,
     empty: &mut u32,
+    table: Option<&TrigTable>,
     depth_mm: u32,
     theta: u16,
     phi: u16,
@@ -421,8 +472,41 @@ fn push_spherical(
         *empty += 1;
         return;
     }
-    let (x_m, y_m, z_m) = spherical_to_xyz(depth_mm, theta, phi);
+    let (x_m, y_m, z_m) = match table {
+        Some(t) => t.to_xyz(depth_mm, theta, phi),
+        None => spherical_to_xyz(depth_mm, theta, phi),
+    };
     out.push(Point { x_m, y_m, z_m, reflectivity, tag, line, echo, offset_ns });
+}
+
+/// Entries of the sine table: every u16 angle in 0.01 degrees, plus 90 degrees for cosines.
+const TRIG_LEN: usize = 65_536 + 9_000;
+
+/// `sin(i * 0.01 deg)` for every u16 angle `i` (and `cos(i) = sin(i + 9000)`), each correctly
+/// rounded from f64: exact to the last bit where the f32 `sin_cos` is not, and several times faster.
+struct TrigTable(Box<[f32; TRIG_LEN]>);
+
+impl TrigTable {
+    #[inline(always)]
+    fn to_xyz(&self, depth_mm: u32, theta_cdeg: u16, phi_cdeg: u16) -> (f32, f32, f32) {
+        let (t, p) = (usize::from(theta_cdeg), usize::from(phi_cdeg));
+        let (st, ct) = (self.0[t], self.0[t + 9_000]);
+        let (sp, cp) = (self.0[p], self.0[p + 9_000]);
+        let d = depth_mm as f32 * 1e-3;
+        (d * st * cp, d * st * sp, d * ct)
+    }
+}
+
+/// The table, built on first use (about 300 KB, well under a millisecond); `None` only if it
+/// could not be built, in which case points are converted with `sin_cos`.
+fn trig_table() -> Option<&'static TrigTable> {
+    static TABLE: std::sync::OnceLock<Option<TrigTable>> = std::sync::OnceLock::new();
+    TABLE
+        .get_or_init(|| {
+            let sines: Vec<f32> = (0..TRIG_LEN).map(|i| (i as f64 * 0.01).to_radians().sin() as f32).collect();
+            sines.into_boxed_slice().try_into().ok().map(TrigTable)
+        })
+        .as_ref()
 }
 
 /// One return to encode; all-zero coordinates encode an empty return.

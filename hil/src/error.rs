@@ -1,0 +1,36 @@
+//! The one error type of the hil crate.
+
+use std::net::SocketAddrV4;
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Everything that can go wrong in a mock device.
+#[derive(Debug, Error)]
+pub enum HilError {
+    /// A configuration value out of range or inconsistent.
+    #[error("configuration: {field}: {reason}")]
+    Config { field: &'static str, reason: String },
+    /// A socket could not be bound.
+    #[error("binding {addr}: {source}")]
+    Bind { addr: SocketAddrV4, source: std::io::Error },
+    /// Another socket operation failed.
+    #[error("{context}: {source}")]
+    Io { context: String, source: std::io::Error },
+    /// A capture file could not be opened or read.
+    #[error("capture {path}: {source}")]
+    Capture { path: PathBuf, source: starc_livox::LivoxError },
+    /// A capture file holds no packet a source can replay.
+    #[error("capture {path}: {reason}")]
+    EmptyCapture { path: PathBuf, reason: &'static str },
+    /// The mock's task ended abnormally (panicked or was cancelled).
+    #[error("mock task: {0}")]
+    Task(String),
+}
+
+impl HilError {
+    pub fn config(field: &'static str, reason: impl Into<String>) -> Self {
+        Self::Config { field, reason: reason.into() }
+    }
+}
+
+pub type Result<T, E = HilError> = std::result::Result<T, E>;
