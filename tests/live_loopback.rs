@@ -46,7 +46,8 @@ async fn collect(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn three_devices_found_by_broadcast_stream_points_and_imu() {
     let broadcast = SocketAddrV4::new(Ipv4Addr::LOCALHOST, free_port());
-    let (driver, mut events) = LivoxDriver::start(driver_config(Some(broadcast))).await.unwrap_or_else(|e| panic!("{e}"));
+    let (driver, mut events) =
+        LivoxDriver::start(driver_config(Some(broadcast))).await.unwrap_or_else(|e| panic!("{e}"));
     let ips: Vec<Ipv4Addr> = (21..24).map(|d| Ipv4Addr::new(127, 0, 0, d)).collect();
     let mut mocks = Vec::new();
     for (k, ip) in ips.iter().enumerate() {
@@ -115,7 +116,8 @@ async fn connects_without_discovery_sets_dual_return_and_survives_a_power_cycle(
     mock_config.broadcast_to = SocketAddrV4::new(Ipv4Addr::LOCALHOST, free_port());
     let mock = MockAvia::spawn(mock_config.clone()).await.unwrap_or_else(|e| panic!("{e}"));
 
-    let first = collect(&mut events, 3.0, |e| matches!(e, LivoxEvent::Points(p) if p.header.data_type as u8 == 4)).await;
+    let first =
+        collect(&mut events, 3.0, |e| matches!(e, LivoxEvent::Points(p) if p.header.data_type as u8 == 4)).await;
     assert!(first.iter().any(|e| matches!(e, LivoxEvent::Connected { ip: i, .. } if *i == ip)));
     let dual = first.iter().rev().find_map(|e| match e {
         LivoxEvent::Points(p) => Some(p.clone()),
@@ -131,7 +133,8 @@ async fn connects_without_discovery_sets_dual_return_and_survives_a_power_cycle(
     assert!(lost.iter().any(|e| matches!(e, LivoxEvent::Lost { ip: i } if *i == ip)), "no loss after 5 s of silence");
 
     let mock = MockAvia::spawn(mock_config).await.unwrap_or_else(|e| panic!("{e}"));
-    let again = collect(&mut events, 4.0, |e| matches!(e, LivoxEvent::Scan { scan, .. } if !scan.points.is_empty())).await;
+    let again =
+        collect(&mut events, 4.0, |e| matches!(e, LivoxEvent::Scan { scan, .. } if !scan.points.is_empty())).await;
     assert!(again.iter().any(|e| matches!(e, LivoxEvent::Connected { .. })), "no reconnection");
     assert!(again.iter().any(|e| matches!(e, LivoxEvent::Scan { .. })), "no data after reconnection");
     driver.stop().await.unwrap_or_else(|e| panic!("{e}"));

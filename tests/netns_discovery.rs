@@ -75,7 +75,18 @@ fn avia_found_by_broadcast_streams_to_the_host() {
     let (dev, host) = (ns.names[0].clone(), ns.names[1].clone());
     let mock = starc_in(
         &dev,
-        &["mock", "avia", "--ip", "192.168.1.110", "--code", "NETNSAVIA000001", "--broadcast-to", "255.255.255.255:55000", "--duration", "12"],
+        &[
+            "mock",
+            "avia",
+            "--ip",
+            "192.168.1.110",
+            "--code",
+            "NETNSAVIA000001",
+            "--broadcast-to",
+            "255.255.255.255:55000",
+            "--duration",
+            "12",
+        ],
     )
     .stdout(Stdio::null())
     .stderr(Stdio::null())

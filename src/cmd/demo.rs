@@ -104,7 +104,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         let _ = rates.report(1.0, Some("(flush)"));
         println!("\nsummary over {:.0} s:", args.seconds);
-        println!("{:<16} {:<10} {:>6} {:>12} {:>12} {:>10} {:>8} {:>8}", "device", "ip", "scans", "returns", "non-empty", "imu", "lost", "bad");
+        println!(
+            "{:<16} {:<10} {:>6} {:>12} {:>12} {:>10} {:>8} {:>8}",
+            "device", "ip", "scans", "returns", "non-empty", "imu", "lost", "bad"
+        );
         for (ip, d) in &rates.devices {
             let t = &d.total;
             println!(

@@ -112,7 +112,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("no Livox devices heard in {:.1} s on {}", args.seconds, args.listen);
         return Ok(());
     }
-    println!("{:<17} {:<15} {:<8} {:<10} {:<13} {:<6} STATUS", "BROADCAST CODE", "IP", "TYPE", "FIRMWARE", "STATE", "SYNC");
+    println!(
+        "{:<17} {:<15} {:<8} {:<10} {:<13} {:<6} STATUS",
+        "BROADCAST CODE", "IP", "TYPE", "FIRMWARE", "STATE", "SYNC"
+    );
     let dash = || "-".to_string();
     for l in &listed {
         println!(

@@ -14,6 +14,10 @@ pub enum Command {
 
 #[derive(clap::Args)]
 pub struct MonitorArgs {
+    /// Driver settings from a TOML file (see config/livox.toml); replaces the flags below but
+    /// --device and --seconds.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
     /// Broadcast code or IP of the device to show (default: every device).
     #[arg(long)]
     pub device: Option<String>,
@@ -75,17 +79,29 @@ pub fn parse_listen(text: &str) -> anyhow::Result<Option<SocketAddrV4>> {
     Ok(Some(text.parse().map_err(|e| anyhow::anyhow!("--listen {text}: {e}"))?))
 }
 
+/// Reads a driver config file; errors name the file, line and key.
+pub fn load_driver_config(path: &std::path::Path) -> anyhow::Result<DriverConfig> {
+    let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let config: DriverConfig = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    config.scan.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(config)
+}
+
 fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
     let listen = if args.passive { None } else { parse_listen(&args.listen)? };
-    let config = DriverConfig {
-        host_ip: args.host_ip,
-        broadcast_listen: listen,
-        connect: if args.passive { Vec::new() } else { args.connect.clone() },
-        cmd_port: args.cmd_port,
-        data_port: args.data_port,
-        imu_port: args.data_port,
-        session: SessionConfig { return_mode: args.return_mode.map(Into::into), ..SessionConfig::default() },
-        ..DriverConfig::default()
+    let config = if let Some(path) = &args.config {
+        load_driver_config(path)?
+    } else {
+        DriverConfig {
+            host_ip: args.host_ip,
+            broadcast_listen: listen,
+            connect: if args.passive { Vec::new() } else { args.connect.clone() },
+            cmd_port: args.cmd_port,
+            data_port: args.data_port,
+            imu_port: args.data_port,
+            session: SessionConfig { return_mode: args.return_mode.map(Into::into), ..SessionConfig::default() },
+            ..DriverConfig::default()
+        }
     };
     runtime()?.block_on(async move {
         let (driver, mut events) = LivoxDriver::start(config).await?;
@@ -115,4 +131,26 @@ fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
         driver.stop().await?;
         anyhow::Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_example_config_is_the_default_but_for_host_ip() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/livox.toml");
+        let loaded = load_driver_config(&path);
+        assert!(loaded.is_ok(), "{loaded:?}", loaded = loaded.as_ref().err());
+        let Ok(loaded) = loaded else { return };
+        let expected = DriverConfig { host_ip: Ipv4Addr::new(192, 168, 1, 50), ..DriverConfig::default() };
+        assert_eq!(loaded, expected);
+    }
+
+    #[test]
+    fn unknown_keys_are_refused_with_their_line() {
+        let err = toml::from_str::<DriverConfig>("host_ip = \"127.0.0.1\"\n[scan]\nperiod = 5\n").err();
+        let text = err.map(|e| e.to_string()).unwrap_or_default();
+        assert!(text.contains("period") && text.contains("line 3"), "{text}");
+    }
 }

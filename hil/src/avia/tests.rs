@@ -754,3 +754,14 @@ fn capture_source_copes_with_one_kind_of_packet_and_imu_push_off() {
     let full = out.iter().filter(|d| DataPacket::parse(&d.bytes).unwrap().count_returns().empty < 96).count();
     assert!(full >= 495, "{full}");
 }
+
+#[test]
+fn the_example_config_file_loads_and_validates() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/mock_avia.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let c: MockAviaConfig = toml::from_str(&text).unwrap();
+    c.validate().unwrap();
+    assert_eq!(c.ip, std::net::Ipv4Addr::new(127, 0, 0, 2));
+    assert_eq!(c.broadcast_code.as_deref(), Some("STARCMOCK000002"));
+    assert_eq!(c.seed, 7);
+}

@@ -88,22 +88,58 @@ pub struct ImuReading {
 /// What the driver reports.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LivoxEvent {
-    Discovered { ip: Ipv4Addr, code: BroadcastCode, device_type: DeviceType },
-    Connected { ip: Ipv4Addr, code: Option<BroadcastCode> },
-    Configured { ip: Ipv4Addr },
-    DeviceInfo { ip: Ipv4Addr, firmware: [u8; 4] },
-    Heartbeat { ip: Ipv4Addr, work_state: u8, status: StatusWord },
-    Refused { ip: Ipv4Addr, command: CommandId, ret: u8 },
-    Unanswered { ip: Ipv4Addr, command: CommandId },
-    Lost { ip: Ipv4Addr },
-    AbnormalStatus { ip: Ipv4Addr, status: StatusWord },
+    Discovered {
+        ip: Ipv4Addr,
+        code: BroadcastCode,
+        device_type: DeviceType,
+    },
+    Connected {
+        ip: Ipv4Addr,
+        code: Option<BroadcastCode>,
+    },
+    Configured {
+        ip: Ipv4Addr,
+    },
+    DeviceInfo {
+        ip: Ipv4Addr,
+        firmware: [u8; 4],
+    },
+    Heartbeat {
+        ip: Ipv4Addr,
+        work_state: u8,
+        status: StatusWord,
+    },
+    Refused {
+        ip: Ipv4Addr,
+        command: CommandId,
+        ret: u8,
+    },
+    Unanswered {
+        ip: Ipv4Addr,
+        command: CommandId,
+    },
+    Lost {
+        ip: Ipv4Addr,
+    },
+    AbnormalStatus {
+        ip: Ipv4Addr,
+        status: StatusWord,
+    },
     Points(PointPacket),
-    Scan { ip: Ipv4Addr, scan: Scan },
+    Scan {
+        ip: Ipv4Addr,
+        scan: Scan,
+    },
     Imu(ImuReading),
     /// A datagram that did not decode (bad CRC, wrong length, ...).
-    BadDatagram { from: SocketAddrV4, error: String },
+    BadDatagram {
+        from: SocketAddrV4,
+        error: String,
+    },
     /// Events dropped because the consumer was too slow (reported once it catches up).
-    Dropped { events: u64 },
+    Dropped {
+        events: u64,
+    },
 }
 
 enum Control {
@@ -179,10 +215,7 @@ impl LivoxDriver {
 
     /// Sends a command to a connected device (after its queued setup commands).
     pub async fn command(&self, ip: Ipv4Addr, request: Request) -> Result<()> {
-        self.control
-            .send(Control::Send { ip, request })
-            .await
-            .map_err(|_| LivoxError::Timeout("driver task".into()))
+        self.control.send(Control::Send { ip, request }).await.map_err(|_| LivoxError::Timeout("driver task".into()))
     }
 
     /// Stops sampling on every device, disconnects, flushes the last scans and ends the task.

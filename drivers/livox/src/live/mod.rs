@@ -8,4 +8,6 @@ pub mod session;
 pub mod socket;
 
 pub use driver::{DriverConfig, ImuReading, LivoxDriver, LivoxEvent, PointPacket};
-pub use session::{DeviceSession, HostEndpoint, ReturnModeSetting, SessionConfig, SessionEvent, SessionOutput, SessionState};
+pub use session::{
+    DeviceSession, HostEndpoint, ReturnModeSetting, SessionConfig, SessionEvent, SessionOutput, SessionState,
+};

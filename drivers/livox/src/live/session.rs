@@ -94,14 +94,29 @@ pub enum SessionEvent {
     Connected,
     /// All setup commands acknowledged.
     Configured,
-    DeviceInfo { firmware: [u8; 4] },
-    Heartbeat { work_state: u8, status: StatusWord },
-    Refused { command: CommandId, ret: u8 },
+    DeviceInfo {
+        firmware: [u8; 4],
+    },
+    Heartbeat {
+        work_state: u8,
+        status: StatusWord,
+    },
+    Refused {
+        command: CommandId,
+        ret: u8,
+    },
     /// A command went unanswered `max_sends` times.
-    Unanswered { command: CommandId },
+    Unanswered {
+        command: CommandId,
+    },
     Lost,
-    AbnormalStatus { status: StatusWord },
-    Acked { command: CommandId, response: Response },
+    AbnormalStatus {
+        status: StatusWord,
+    },
+    Acked {
+        command: CommandId,
+        response: Response,
+    },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -284,7 +299,10 @@ impl DeviceSession {
                             out.push(SessionOutput::Event(SessionEvent::Connected));
                             self.pump(now_ns, &mut out);
                         } else {
-                            out.push(SessionOutput::Event(SessionEvent::Refused { command: CommandId::Handshake, ret }));
+                            out.push(SessionOutput::Event(SessionEvent::Refused {
+                                command: CommandId::Handshake,
+                                ret,
+                            }));
                         }
                     }
                     (SessionState::Connected, Response::Heartbeat { work_state, status, .. }) => {
@@ -294,9 +312,8 @@ impl DeviceSession {
                         }));
                     }
                     (SessionState::Connected, response) => {
-                        let matches_flight = self
-                            .in_flight
-                            .is_some_and(|f| f.seq == frame.seq && f.request.id() == response.id());
+                        let matches_flight =
+                            self.in_flight.is_some_and(|f| f.seq == frame.seq && f.request.id() == response.id());
                         if matches_flight {
                             self.in_flight = None;
                             if let Response::QueryDeviceInfo { firmware, ret: 0 } = response {
@@ -308,7 +325,10 @@ impl DeviceSession {
                                     ret: response.ret(),
                                 }));
                             } else {
-                                out.push(SessionOutput::Event(SessionEvent::Acked { command: response.id(), response }));
+                                out.push(SessionOutput::Event(SessionEvent::Acked {
+                                    command: response.id(),
+                                    response,
+                                }));
                             }
                             self.pump(now_ns, &mut out);
                         }
@@ -325,7 +345,8 @@ impl DeviceSession {
     pub fn close(&mut self) -> Vec<Vec<u8>> {
         let mut frames = Vec::new();
         if self.state == SessionState::Connected {
-            let stop = (self.config.configure && self.config.start_sampling).then_some(Request::Sampling { start: false });
+            let stop =
+                (self.config.configure && self.config.start_sampling).then_some(Request::Sampling { start: false });
             for request in stop.into_iter().chain([Request::Disconnect]) {
                 let (_, bytes) = self.encode(request);
                 frames.extend(bytes);
@@ -430,7 +451,8 @@ mod tests {
             // Keep the device alive with heartbeat ACKs only.
             let o = s.poll(now);
             resends += sent(&o).iter().filter(|f| f.seq == query[0].seq).count();
-            gave_up |= o.contains(&SessionOutput::Event(SessionEvent::Unanswered { command: CommandId::QueryDeviceInfo }));
+            gave_up |=
+                o.contains(&SessionOutput::Event(SessionEvent::Unanswered { command: CommandId::QueryDeviceInfo }));
             s.handle(now, &ack(0, Response::Heartbeat { ret: 0, work_state: 1, feature: 0, status: 0 }));
         }
         assert_eq!(resends, 3);
@@ -444,7 +466,9 @@ mod tests {
         let out = answer(&mut s, 0, hs);
         let q = sent(&out);
         let out = s.handle(MS, &ack(q[0].seq, Response::Ret { id: CommandId::QueryDeviceInfo, ret: 1 }));
-        assert!(out.contains(&SessionOutput::Event(SessionEvent::Refused { command: CommandId::QueryDeviceInfo, ret: 1 })));
+        assert!(
+            out.contains(&SessionOutput::Event(SessionEvent::Refused { command: CommandId::QueryDeviceInfo, ret: 1 }))
+        );
         assert_eq!(sent(&out).first().map(|f| f.id()), Some(CommandId::CoordinateSystem));
     }
 

@@ -8,8 +8,8 @@ use std::net::SocketAddrV4;
 /// broadcasts on one port; the large receive buffer rides out scheduling hiccups at 3.4 MB/s.
 pub fn bind_udp(addr: SocketAddrV4, reuse: bool, broadcast: bool) -> Result<tokio::net::UdpSocket> {
     let ctx = |what: &str| format!("{what} UDP {addr}");
-    let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))
-        .map_err(|e| LivoxError::io(ctx("create"), e))?;
+    let socket =
+        Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).map_err(|e| LivoxError::io(ctx("create"), e))?;
     if reuse {
         socket.set_reuse_address(true).map_err(|e| LivoxError::io(ctx("SO_REUSEADDR on"), e))?;
     }
