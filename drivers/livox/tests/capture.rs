@@ -684,6 +684,24 @@ fn summary_counts_control_frames_loss_and_junk() {
         .unwrap();
     push(&mut s, host, device, hb.clone());
     push(&mut s, device, host, ack);
+    // The official SDK's handshake request carries cmd_type 1 (ACK); it is still a request.
+    let hs_payload = [127, 0, 0, 1, 0xc1, 0xda, 0xcd, 0xd8, 0xc1, 0xda];
+    let sdk_handshake = starc_livox::control::RawFrame {
+        cmd_type: starc_livox::control::CmdType::Ack,
+        seq: 2,
+        cmd_set: 0,
+        cmd_id: 1,
+        payload: &hs_payload,
+    }
+    .encode()
+    .unwrap();
+    push(&mut s, host, device, sdk_handshake);
+    push(
+        &mut s,
+        device,
+        host,
+        ControlFrame::response(2, Response::Ret { id: CommandId::Handshake, ret: 0 }).encode().unwrap(),
+    );
     push(&mut s, device, host, refused);
     push(&mut s, device, addr(255, 55000), bc);
     let mut bad_crc = hb.clone();
@@ -706,6 +724,8 @@ fn summary_counts_control_frames_loss_and_junk() {
     let sampling = sum.control_frames.get("sampling").copied().unwrap();
     assert_eq!((sampling.ack, sampling.ack_error), (1, 1));
     assert_eq!(sum.control_frames.get("broadcast").map(|c| c.msg), Some(1));
+    let hs = sum.control_frames.get("handshake").copied().unwrap();
+    assert_eq!((hs.cmd, hs.ack, hs.ack_ok), (1, 1, 1));
     assert_eq!(sum.crc_failures, 1);
     assert_eq!(sum.point_packets, 6);
     assert_eq!(sum.points, 6 * 96);
@@ -714,7 +734,7 @@ fn summary_counts_control_frames_loss_and_junk() {
     assert_eq!((sum.undecodable, sum.decode_errors), (1, 1));
     assert_eq!(sum.sync_sources.get("ptp"), Some(&6));
     let dev = sum.devices.get("192.168.1.10").unwrap();
-    assert_eq!((dev.control_frames, dev.point_packets, dev.lost_packets), (4, 6, 2));
+    assert_eq!((dev.control_frames, dev.point_packets, dev.lost_packets), (6, 6, 2));
     assert_eq!(sum.first_timestamp_ns, Some(1_000_000));
     assert_eq!(sum.last_timestamp_ns, Some(1_000_000 + 6 * interval));
 }

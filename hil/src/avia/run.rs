@@ -403,7 +403,12 @@ async fn send(socket: &UdpSocket, to: SocketAddrV4, bytes: &[u8], stats: &mut Mo
 async fn execute(sockets: &Sockets, actions: Vec<Action>, stats: &mut MockStats, code: BroadcastCode) {
     for action in actions {
         match action {
-            Action::SendControl { to, bytes } => send(&sockets.cmd, to, &bytes, stats).await,
+            Action::SendControl { to, bytes } => {
+                if tracing::enabled!(tracing::Level::DEBUG) {
+                    log_control(&code, to, &bytes);
+                }
+                send(&sockets.cmd, to, &bytes, stats).await;
+            }
             Action::SendPoints { to, bytes } => send(&sockets.data, to, &bytes, stats).await,
             Action::SendImu { to, bytes } => {
                 send(sockets.imu.as_ref().unwrap_or(&sockets.data), to, &bytes, stats).await;
@@ -439,5 +444,24 @@ fn log_event(code: BroadcastCode, event: &DeviceEvent) {
         DeviceEvent::Refused { from, cmd_set, cmd_id, reason } => {
             tracing::debug!(code = %code, "refused ({cmd_set},{cmd_id}) from {from}: {reason}");
         }
+    }
+}
+
+/// Every frame the mock sends, at debug level: what a user bringing up a host wants to see.
+fn log_control(code: &impl std::fmt::Display, to: SocketAddrV4, bytes: &[u8]) {
+    match starc_livox::control::ControlFrame::decode(bytes) {
+        Ok(frame) => match frame.body {
+            starc_livox::control::Body::Response(r) => tracing::debug!(
+                code = %code,
+                "ack {} seq {} ret {} to {to}",
+                r.id().name(),
+                frame.seq,
+                r.ret()
+            ),
+            _ => {
+                tracing::debug!(code = %code, "{} {} seq {} to {to}", frame.cmd_type.name(), frame.id().name(), frame.seq)
+            }
+        },
+        Err(e) => tracing::debug!(code = %code, "undecodable frame to {to}: {e}"),
     }
 }

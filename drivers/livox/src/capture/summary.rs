@@ -200,12 +200,15 @@ impl Summarizer {
             None => format!("unknown_{}_{}", raw.cmd_set, raw.cmd_id),
         };
         let counts = self.control.entry(name).or_default();
-        match raw.cmd_type {
-            CmdType::Cmd => counts.cmd += 1,
-            CmdType::Ack => counts.ack += 1,
-            CmdType::Msg => counts.msg += 1,
+        let decoded = ControlFrame::from_raw(raw);
+        // Count by what the frame is, not its cmd_type byte: the official SDK sends its
+        // handshake request with cmd_type 1 (ACK), which the decoder reads as the request it is.
+        match (&decoded, raw.cmd_type) {
+            (Ok(ControlFrame { body: Body::Request(_), .. }), _) | (Err(_), CmdType::Cmd) => counts.cmd += 1,
+            (Ok(ControlFrame { body: Body::Response(_), .. }), _) | (Err(_), CmdType::Ack) => counts.ack += 1,
+            (Ok(ControlFrame { body: Body::Message(_), .. }), _) | (Err(_), CmdType::Msg) => counts.msg += 1,
         }
-        match ControlFrame::from_raw(raw) {
+        match decoded {
             Ok(frame) => {
                 if let Body::Response(r) = frame.body {
                     if r.ret() == 0 {
