@@ -366,6 +366,28 @@ fn capped_capacity(count: u64, available_bytes: usize, min_bytes_per_point: usiz
     usize::try_from(count).unwrap_or(usize::MAX).min(fit)
 }
 
+/// The point records both PCD and PLY writers use, binary little-endian: x y z intensity (f32),
+/// offset_time (u32), line, tag (u8); 22 bytes a point.
+fn write_binary_records(cloud: &PointCloud, out: &mut Vec<u8>) {
+    out.reserve(cloud.points.len() * 22);
+    for p in &cloud.points {
+        for v in [p.x_m, p.y_m, p.z_m, p.intensity] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&p.offset_ns.to_le_bytes());
+        out.extend_from_slice(&[p.line, p.tag]);
+    }
+}
+
+/// The same records as text, one point a line.
+fn write_ascii_records(cloud: &PointCloud, out: &mut Vec<u8>) {
+    use std::io::Write;
+    for p in &cloud.points {
+        // `{}` prints the shortest text that parses back to the same f32.
+        let _ = writeln!(out, "{} {} {} {} {} {} {}", p.x_m, p.y_m, p.z_m, p.intensity, p.offset_ns, p.line, p.tag);
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 pub(crate) mod tests {

@@ -393,21 +393,9 @@ pub fn encode(cloud: &PointCloud, encoding: Encoding, out: &mut Vec<u8>) {
     );
     match encoding {
         Encoding::BinaryLittleEndian => {
-            out.reserve(n * 22);
-            for p in &cloud.points {
-                for v in [p.x_m, p.y_m, p.z_m, p.intensity] {
-                    out.extend_from_slice(&v.to_le_bytes());
-                }
-                out.extend_from_slice(&p.offset_ns.to_le_bytes());
-                out.extend_from_slice(&[p.line, p.tag]);
-            }
+            super::write_binary_records(cloud, out);
         }
-        Encoding::Ascii => {
-            for p in &cloud.points {
-                let _ =
-                    writeln!(out, "{} {} {} {} {} {} {}", p.x_m, p.y_m, p.z_m, p.intensity, p.offset_ns, p.line, p.tag);
-            }
-        }
+        Encoding::Ascii => super::write_ascii_records(cloud, out),
     }
 }
 
