@@ -11,7 +11,7 @@ use starc_livox::capture::{self, Datagram};
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{Scan, ScanAssembler, ScanConfig, TagFilter};
 use starc_pipeline::cloud::{self, CloudFormat, CloudPoint, PointCloud};
-use starc_time::{Clock, Stamp};
+use starc_time::Clock;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::io::{IsTerminal, Write as _};
@@ -166,7 +166,7 @@ pub fn scan_to_cloud(scan: &Scan) -> PointCloud {
 pub struct DeviceStats {
     pub point_packets: u64,
     pub imu_packets: u64,
-    /// Packets older than the scan in progress (reordered in the capture), dropped.
+    /// Packets older than the scan in progress (reordered in the capture): their points are dropped.
     pub late_packets: u64,
     /// Packets missing, from time-stamp gaps.
     pub lost_packets: u64,
@@ -203,9 +203,6 @@ impl Summary {
 struct Device {
     dir: PathBuf,
     assembler: ScanAssembler,
-    /// Latest firing time pushed (on its clock), to keep reordered packets away from the
-    /// assembler.
-    latest: Option<Stamp>,
     stats: DeviceStats,
     done: Vec<Scan>,
 }
@@ -240,7 +237,6 @@ pub fn export(
 ) -> anyhow::Result<Summary> {
     // Fails early on a bad --period-ms and the like.
     ScanAssembler::new(config.clone()).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let period_ns = config.period_ns();
     let mut summary = Summary::default();
     let mut devices: BTreeMap<DeviceKey, Device> = BTreeMap::new();
     for item in capture {
@@ -266,7 +262,6 @@ pub fn export(
             std::collections::btree_map::Entry::Vacant(e) => e.insert(Device {
                 dir: out.join(key.to_string()),
                 assembler: ScanAssembler::new(config.clone()).map_err(|e| anyhow::anyhow!("{e}"))?,
-                latest: None,
                 stats: DeviceStats::default(),
                 done: Vec::new(),
             }),
@@ -276,22 +271,6 @@ pub fn export(
             continue;
         }
         dev.stats.point_packets += 1;
-        let ts = packet.header.timestamp;
-        // The assembler expects time to move forward; a packet older than the start of the scan
-        // in progress (a reordered capture) is dropped here, as the assembler would drop its points.
-        if let Some(latest) = dev.latest {
-            if latest.clock == ts.clock && ts.ns < latest.ns - latest.ns % period_ns {
-                dev.stats.late_packets += 1;
-                continue;
-            }
-        }
-        let dt = packet.header.data_type;
-        let last_firing = (dt.firings_per_packet().saturating_sub(1) as u64) * u64::from(dt.firing_interval_ns());
-        let end = Stamp::new(ts.ns.saturating_add(last_firing), ts.clock);
-        dev.latest = Some(match dev.latest {
-            Some(l) if l.clock == end.clock && l.ns > end.ns => l,
-            _ => end,
-        });
         let host = (datagram.time.clock == Clock::Host).then_some(datagram.time);
         dev.assembler.push(&packet, host, &mut dev.done);
         if !dev.done.is_empty() {
@@ -304,6 +283,7 @@ pub fn export(
         dev.done.extend(dev.assembler.finish());
         dev.flush(format)?;
         dev.stats.lost_packets = dev.assembler.lost_packets();
+        dev.stats.late_packets = dev.assembler.late_packets();
         summary.devices.insert(*key, dev.stats.clone());
     }
     Ok(summary)
@@ -391,6 +371,7 @@ mod tests {
     use starc_livox::capture::pcap::PcapWriter;
     use starc_livox::capture::TsPrecision;
     use starc_livox::data::{encode_point_packet, DataHeader, DataType, Return, StatusWord};
+    use starc_time::Stamp;
     use std::net::SocketAddrV4;
 
     fn packet(ts_ns: u64, x_m: f32) -> Vec<u8> {

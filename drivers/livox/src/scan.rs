@@ -4,7 +4,7 @@
 //! can move it to the scan end with the motion in between. Scans start at multiples of the period
 //! on the packets' clock, so scans of two devices on one PTP clock line up.
 
-use crate::data::{DataPacket, GapDetector, Point};
+use crate::data::{DataHeader, DataPacket, Gap, GapDetector, Point, ReturnCounts};
 use serde::{Deserialize, Serialize};
 use starc_time::Stamp;
 
@@ -135,8 +135,7 @@ pub struct ScanAssembler {
     decimation_counter: u32,
     gaps: GapDetector,
     scratch: Vec<Point>,
-    late: bool,
-    late_points: u64,
+    late_packets: u64,
 }
 
 impl ScanAssembler {
@@ -150,8 +149,7 @@ impl ScanAssembler {
             decimation_counter: 0,
             gaps: GapDetector::new(),
             scratch: Vec::new(),
-            late: false,
-            late_points: 0,
+            late_packets: 0,
         })
     }
 
@@ -168,29 +166,38 @@ impl ScanAssembler {
         if packet.is_imu() {
             return;
         }
-        let stamp = packet.header.timestamp;
-        let gap = self.gaps.observe(stamp, packet.header.data_type.packet_interval_ns());
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
         let counts = packet.decode_points(&mut scratch);
-        let first_ns = stamp.ns;
+        self.push_points(&packet.header, &scratch, counts, host_receive, done);
+        self.scratch = scratch;
+    }
+
+    /// Adds the points of a packet someone already decoded (with [`DataPacket::decode_points`]),
+    /// so that a consumer that also wants the raw points decodes each packet once.
+    pub fn push_points(
+        &mut self,
+        header: &DataHeader,
+        points: &[Point],
+        counts: ReturnCounts,
+        host_receive: Option<Stamp>,
+        done: &mut Vec<Scan>,
+    ) {
+        let stamp = header.timestamp;
+        let gap = self.gaps.observe(stamp, header.data_type.packet_interval_ns());
         let mut counted_packet = false;
-        for p in &scratch {
-            let t = Stamp::new(first_ns.saturating_add(u64::from(p.offset_ns)), stamp.clock);
-            self.roll_over(t, done);
-            if std::mem::take(&mut self.late) {
-                self.late_points += 1;
+        let mut late = false;
+        for p in points {
+            let t = Stamp::new(stamp.ns.saturating_add(u64::from(p.offset_ns)), stamp.clock);
+            if !self.roll_over(t, done) {
+                late = true;
                 continue;
             }
             let Some(scan) = self.current.as_mut() else { continue };
             if !counted_packet {
-                scan.packets += 1;
-                scan.returns += u64::from(counts.returns);
-                scan.empty += u64::from(counts.empty);
-                scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
+                count_packet(scan, counts, gap, host_receive);
                 counted_packet = true;
             }
-            scan.last_host_receive = host_receive.or(scan.last_host_receive);
             if !keep(&self.config, p, &mut self.decimation_counter) {
                 scan.filtered += 1;
                 continue;
@@ -205,46 +212,35 @@ impl ScanAssembler {
                 offset_ns: (t.ns - scan.start.ns) as u32,
             });
         }
-        if !counted_packet {
-            // A packet of empty returns still counts towards the scan it fell in.
-            self.roll_over(stamp, done);
-            let late = std::mem::take(&mut self.late);
-            if let Some(scan) = self.current.as_mut().filter(|_| !late) {
-                scan.packets += 1;
-                scan.returns += u64::from(counts.returns);
-                scan.empty += u64::from(counts.empty);
-                scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
-                scan.last_host_receive = host_receive.or(scan.last_host_receive);
+        // A packet of empty returns still counts towards the scan it fell in.
+        if points.is_empty() {
+            if !self.roll_over(stamp, done) {
+                late = true;
+            } else if let Some(scan) = self.current.as_mut() {
+                count_packet(scan, counts, gap, host_receive);
             }
         }
-        self.scratch = scratch;
+        self.late_packets += u64::from(late);
     }
 
-    /// Makes `t` fall inside the current scan, finishing scans as time passes them.
-    fn roll_over(&mut self, t: Stamp, done: &mut Vec<Scan>) {
+    /// Makes `t` fall inside the current scan, finishing the scan in progress when time has
+    /// left it. Returns false for a point late for the scan in progress (a reordered packet,
+    /// less than a period behind), which is then dropped: its scan is already out.
+    fn roll_over(&mut self, t: Stamp, done: &mut Vec<Scan>) -> bool {
         if let Some(scan) = &self.current {
-            let inside = scan.start.clock == t.clock && t.ns >= scan.start.ns && t.ns - scan.start.ns < self.period_ns;
-            if inside {
-                return;
+            if scan.start.clock == t.clock {
+                if t.ns >= scan.start.ns && t.ns - scan.start.ns < self.period_ns {
+                    return true;
+                }
+                if t.ns < scan.start.ns && scan.start.ns - t.ns <= self.period_ns {
+                    return false;
+                }
             }
-            let next_is_contiguous = scan.start.clock == t.clock
-                && t.ns >= scan.start.ns + self.period_ns
-                && t.ns - scan.start.ns < 2 * self.period_ns;
-            if t.clock == scan.start.clock && t.ns < scan.start.ns && scan.start.ns - t.ns <= self.period_ns {
-                // A late (reordered) point from the previous scan: keep it out of this one.
-                self.late = true;
-                return;
-            }
-            if let Some(finished) = self.current.take() {
-                done.push(finished);
-            }
-            if next_is_contiguous {
-                let start = Stamp::new(self.aligned_start(t).ns, t.clock);
-                self.current = Some(Scan::empty_at(start, self.period_ns));
-                return;
-            }
+            // Time moved on, or jumped (a resynchronised clock, another clock, a wild stamp).
+            done.extend(self.current.take());
         }
         self.current = Some(Scan::empty_at(self.aligned_start(t), self.period_ns));
+        true
     }
 
     /// Finishes the scan in progress (end of a capture or a stop).
@@ -256,10 +252,19 @@ impl ScanAssembler {
         self.gaps.lost_packets
     }
 
-    /// Points that arrived after their scan was finished (reordered packets); they are dropped.
-    pub fn late_points(&self) -> u64 {
-        self.late_points
+    /// Packets (some of) whose points arrived after their scan was finished; those points are
+    /// dropped.
+    pub fn late_packets(&self) -> u64 {
+        self.late_packets
     }
+}
+
+fn count_packet(scan: &mut Scan, counts: ReturnCounts, gap: Option<Gap>, host_receive: Option<Stamp>) {
+    scan.packets += 1;
+    scan.returns += u64::from(counts.returns);
+    scan.empty += u64::from(counts.empty);
+    scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
+    scan.last_host_receive = host_receive.or(scan.last_host_receive);
 }
 
 #[inline]
@@ -356,6 +361,23 @@ mod tests {
         // Everything but the packet stamped at 3 ns (late for the scan in progress) is kept.
         assert_eq!(total, 499 * 96);
         assert!(scans.iter().filter(|s| s.points.len() > 20_000).count() >= 1);
+    }
+
+    #[test]
+    fn a_packet_reordered_across_a_scan_boundary_is_dropped_and_counted() {
+        let mut packets: Vec<Vec<u8>> = (0..500u64).map(|i| packet_bytes(i * 400_000, 0, 3.0)).collect();
+        packets.swap(249, 250);
+        let Ok(mut a) = ScanAssembler::new(ScanConfig::default()) else { return };
+        let mut done = Vec::new();
+        for b in &packets {
+            if let Ok(p) = DataPacket::parse(b) {
+                a.push(&p, None, &mut done);
+            }
+        }
+        done.extend(a.finish());
+        assert_eq!(a.late_packets(), 1);
+        assert_eq!(done.iter().map(|s| s.points.len()).sum::<usize>(), 499 * 96);
+        assert!(done.iter().all(|s| s.points.iter().all(|p| u64::from(p.offset_ns) < s.period_ns)));
     }
 
     #[test]

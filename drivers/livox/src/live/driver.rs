@@ -325,15 +325,20 @@ impl Core {
         self.devices.insert(ip, Device { session: Some(session), assembler });
     }
 
-    fn on_broadcast(&mut self, from: SocketAddr, bytes: &[u8]) -> Vec<(Ipv4Addr, Vec<u8>)> {
-        let Some(from) = v4(from) else { return Vec::new() };
-        let frame = match ControlFrame::decode(bytes) {
-            Ok(f) => f,
+    /// A verified control frame, or a `BadDatagram` event saying why not.
+    fn decode_control(&mut self, from: SocketAddrV4, bytes: &[u8]) -> Option<ControlFrame> {
+        match ControlFrame::decode(bytes) {
+            Ok(f) => Some(f),
             Err(e) => {
                 self.emit(LivoxEvent::BadDatagram { from, error: e.to_string() });
-                return Vec::new();
+                None
             }
-        };
+        }
+    }
+
+    fn on_broadcast(&mut self, from: SocketAddr, bytes: &[u8]) -> Vec<(Ipv4Addr, Vec<u8>)> {
+        let Some(from) = v4(from) else { return Vec::new() };
+        let Some(frame) = self.decode_control(from, bytes) else { return Vec::new() };
         let Body::Message(Message::Broadcast { code, device_type }) = frame.body else { return Vec::new() };
         let ip = *from.ip();
         let known = self.devices.get(&ip).is_some_and(|d| d.session.is_some());
@@ -348,13 +353,7 @@ impl Core {
 
     fn on_control(&mut self, from: SocketAddr, bytes: &[u8]) -> Vec<(Ipv4Addr, Vec<u8>)> {
         let Some(from) = v4(from) else { return Vec::new() };
-        let frame = match ControlFrame::decode(bytes) {
-            Ok(f) => f,
-            Err(e) => {
-                self.emit(LivoxEvent::BadDatagram { from, error: e.to_string() });
-                return Vec::new();
-            }
-        };
+        let Some(frame) = self.decode_control(from, bytes) else { return Vec::new() };
         let ip = *from.ip();
         let now = self.now_ns();
         let outputs = match self.devices.get_mut(&ip).and_then(|d| d.session.as_mut()) {
@@ -448,13 +447,17 @@ impl Core {
             }));
             return;
         }
+        let mut done = Vec::new();
+        let assembler = self.devices.get_mut(&ip).and_then(|d| d.assembler.as_mut());
         if self.config.emit_packets {
+            // Decode once: the assembler takes the same points the event carries.
             let mut points = Vec::new();
             let counts = packet.decode_points(&mut points);
+            if let Some(a) = assembler {
+                a.push_points(&packet.header, &points, counts, Some(host_receive), &mut done);
+            }
             self.emit(LivoxEvent::Points(PointPacket { ip, header: packet.header, points, counts, host_receive }));
-        }
-        let mut done = Vec::new();
-        if let Some(a) = self.devices.get_mut(&ip).and_then(|d| d.assembler.as_mut()) {
+        } else if let Some(a) = assembler {
             a.push(&packet, Some(host_receive), &mut done);
         }
         for scan in done {
