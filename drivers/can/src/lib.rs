@@ -1,0 +1,1 @@
+//! CAN frames and transports: SocketCAN and slcan (Lawicel) over a serial port.
