@@ -1,0 +1,193 @@
+//! The tokio loop around [`Base`]: a control tick, the bus, operator requests, and adapter
+//! status polls. Received frames are re-stamped on a monotonic clock anchored to the host
+//! realtime clock at start, so watchdog and time-outs never see NTP steps.
+
+use crate::controller::{Base, BaseEvent, BaseStatus};
+use crate::error::{BaseError, Result};
+use crate::kinematics::Twist;
+use crate::safety::{ClearRefused, Fault};
+use starc_can::{BusEvent, BusStats, CanBus, CanFrame};
+use starc_time::Stamp;
+use std::time::Duration;
+use tokio::sync::{mpsc, oneshot, watch};
+use tokio::task::JoinHandle;
+use tokio::time::{Instant, MissedTickBehavior};
+
+/// Host time that only moves forward: the realtime clock at start plus a monotonic elapsed time.
+#[derive(Clone, Copy, Debug)]
+pub struct MonotonicHost {
+    anchor: Stamp,
+    start: Instant,
+}
+
+impl MonotonicHost {
+    pub fn new() -> Self {
+        Self { anchor: Stamp::host_now(), start: Instant::now() }
+    }
+
+    pub fn now(&self) -> Stamp {
+        let ns = i64::try_from(self.start.elapsed().as_nanos()).unwrap_or(i64::MAX);
+        self.anchor.offset_by(ns)
+    }
+}
+
+impl Default for MonotonicHost {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+enum Request {
+    Command(Twist),
+    Estop(bool),
+    Clear(oneshot::Sender<std::result::Result<Vec<Fault>, ClearRefused>>),
+}
+
+/// What a run ends with.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct RunSummary {
+    pub bus: BusStats,
+    pub ticks: u64,
+    pub events_dropped: u64,
+}
+
+/// Talks to a running base.
+pub struct BaseHandle {
+    requests: mpsc::Sender<Request>,
+    status: watch::Receiver<BaseStatus>,
+    stop: Option<oneshot::Sender<()>>,
+    task: JoinHandle<Result<RunSummary>>,
+}
+
+/// Options of the loop.
+#[derive(Clone, Copy, Debug)]
+pub struct RunnerOptions {
+    /// Poll the adapter's status this often (slcan `F`); `None` = never.
+    pub status_poll: Option<Duration>,
+}
+
+/// Starts the loop; events arrive on the returned receiver (dropped, and counted, when it is full).
+pub fn spawn<B: CanBus + 'static>(
+    bus: B,
+    base: Base,
+    options: RunnerOptions,
+) -> (BaseHandle, mpsc::Receiver<BaseEvent>) {
+    let (req_tx, req_rx) = mpsc::channel(64);
+    let (status_tx, status_rx) = watch::channel(base.status());
+    let (event_tx, event_rx) = mpsc::channel(256);
+    let (stop_tx, stop_rx) = oneshot::channel();
+    let task = tokio::spawn(run(bus, base, options, req_rx, status_tx, event_tx, stop_rx));
+    (BaseHandle { requests: req_tx, status: status_rx, stop: Some(stop_tx), task }, event_rx)
+}
+
+impl BaseHandle {
+    /// A velocity command; send one at least every watchdog period.
+    pub async fn command(&self, twist: Twist) -> Result<()> {
+        self.requests.send(Request::Command(twist)).await.map_err(|_| BaseError::Stopped)
+    }
+
+    pub async fn set_estop(&self, pressed: bool) -> Result<()> {
+        self.requests.send(Request::Estop(pressed)).await.map_err(|_| BaseError::Stopped)
+    }
+
+    /// Operator clear; the inner error says why it was refused.
+    pub async fn clear(&self) -> Result<std::result::Result<Vec<Fault>, ClearRefused>> {
+        let (tx, rx) = oneshot::channel();
+        self.requests.send(Request::Clear(tx)).await.map_err(|_| BaseError::Stopped)?;
+        rx.await.map_err(|_| BaseError::Stopped)
+    }
+
+    pub fn status(&self) -> BaseStatus {
+        self.status.borrow().clone()
+    }
+
+    pub fn watch_status(&self) -> watch::Receiver<BaseStatus> {
+        self.status.clone()
+    }
+
+    /// Whether the loop has ended (bus closed or failed).
+    pub fn is_finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
+    /// Halts the motors, stops the loop and returns its counters.
+    pub async fn stop(mut self) -> Result<RunSummary> {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        self.task.await.map_err(|e| BaseError::Io { context: "base task".into(), source: std::io::Error::other(e) })?
+    }
+}
+
+async fn send_all<B: CanBus>(bus: &mut B, frames: &mut Vec<CanFrame>) -> Result<()> {
+    for f in frames.drain(..) {
+        bus.send(&f).await?;
+    }
+    Ok(())
+}
+
+async fn run<B: CanBus>(
+    mut bus: B,
+    mut base: Base,
+    options: RunnerOptions,
+    mut requests: mpsc::Receiver<Request>,
+    status: watch::Sender<BaseStatus>,
+    events: mpsc::Sender<BaseEvent>,
+    mut stop: oneshot::Receiver<()>,
+) -> Result<RunSummary> {
+    let clock = MonotonicHost::new();
+    let period = Duration::from_millis(base.config().control_period_ms);
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let poll_every = options.status_poll.unwrap_or(Duration::from_secs(3600));
+    let mut poll = tokio::time::interval_at(Instant::now() + poll_every, poll_every);
+    let mut summary = RunSummary::default();
+    let mut frames = Vec::new();
+    let outcome: Result<()> = loop {
+        tokio::select! {
+            biased;
+            _ = &mut stop => break Ok(()),
+            received = bus.recv() => match received {
+                Ok(BusEvent::Frame(mut rx)) => {
+                    rx.host = clock.now();
+                    base.handle(&BusEvent::Frame(rx));
+                }
+                Ok(BusEvent::Fault { fault, .. }) => base.handle(&BusEvent::Fault { fault, host: clock.now() }),
+                Err(e) => break Err(e.into()),
+            },
+            request = requests.recv() => match request {
+                Some(Request::Command(t)) => base.command(t, clock.now()),
+                Some(Request::Estop(p)) => base.set_estop(p, clock.now()),
+                Some(Request::Clear(reply)) => {
+                    let _ = reply.send(base.clear_faults(clock.now()));
+                }
+                None => break Ok(()),
+            },
+            _ = tick.tick() => {
+                base.tick(clock.now(), &mut frames);
+                summary.ticks += 1;
+                if let Err(e) = send_all(&mut bus, &mut frames).await {
+                    break Err(e);
+                }
+                status.send_replace(base.status());
+            }
+            _ = poll.tick(), if options.status_poll.is_some() => {
+                if let Err(e) = bus.request_status().await {
+                    break Err(e.into());
+                }
+            }
+        }
+        for e in base.drain_events() {
+            if events.try_send(e).is_err() {
+                summary.events_dropped += 1;
+            }
+        }
+    };
+    let mut halt = base.halt_frames();
+    let halted = send_all(&mut bus, &mut halt).await;
+    status.send_replace(base.status());
+    summary.bus = bus.stats();
+    outcome?;
+    halted?;
+    Ok(summary)
+}
