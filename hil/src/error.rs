@@ -22,6 +22,12 @@ pub enum HilError {
     /// A capture file holds no packet a source can replay.
     #[error("capture {path}: {reason}")]
     EmptyCapture { path: PathBuf, reason: &'static str },
+    /// A scenario file that does not parse or does not make sense; `line` is 1-based.
+    #[error("scenario {origin}{}: {reason}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
+    Scenario { origin: String, line: Option<usize>, reason: String },
+    /// Writing a simulator output failed.
+    #[error("writing {path}: {reason}")]
+    Output { path: PathBuf, reason: String },
     /// The mock's task ended abnormally (panicked or was cancelled).
     #[error("mock task: {0}")]
     Task(String),

@@ -9,5 +9,6 @@
 pub mod avia;
 pub mod error;
 pub mod rng;
+pub mod sim;
 
 pub use error::{HilError, Result};

@@ -1,0 +1,196 @@
+//! The simulated Avia: the Risley pattern cast into the world from the moving sensor, with
+//! range noise, reflectivity from albedo and incidence, range limits, several echoes where the
+//! beam straddles an edge, and a label for every return. It is a [`PointSource`], so the mock
+//! device packetizes and stamps it exactly as it does any other scene.
+
+use crate::avia::{FiringRequest, PointSource};
+use crate::rng::{hash2, SplitMix64};
+use crate::sim::human::Body;
+use crate::sim::imu::{ImuSim, GRAVITY_M_S2};
+use crate::sim::motion::Motion;
+use crate::sim::pattern::AviaPattern;
+use crate::sim::scenario::AviaModel;
+use crate::sim::shapes::{Hit, V3};
+use crate::sim::world::World;
+use nalgebra::{Isometry3, UnitQuaternion};
+use starc_livox::data::{ImuSample, Return};
+use std::sync::Arc;
+
+/// Label of an empty return.
+pub const LABEL_EMPTY: u16 = u16::MAX;
+/// Highest reflectivity byte of a diffuse (Lambertian) surface; above is retro-reflective.
+const DIFFUSE_MAX: f64 = 150.0;
+
+/// The labels of one point packet's returns, firing-major like the returns themselves.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PacketLabels {
+    /// Device time of the packet's first firing.
+    pub first_ns: u64,
+    pub labels: Vec<u16>,
+}
+
+/// A simulated Avia on a moving platform.
+pub struct AviaSim {
+    world: Arc<World>,
+    motion: Arc<dyn Motion>,
+    model: AviaModel,
+    imu: ImuSim,
+    seed: u64,
+    /// Echoes per firing the device asked for last.
+    labels: Vec<PacketLabels>,
+    keep_labels: bool,
+    /// Sub-beam offsets (azimuth, elevation) in degrees sampled across the beam's footprint.
+    sub_beams: Vec<(f64, f64)>,
+    casts: u64,
+}
+
+impl AviaSim {
+    pub fn new(world: Arc<World>, motion: Arc<dyn Motion>, model: AviaModel, imu: ImuSim, seed: u64) -> Self {
+        let [h, v] = model.divergence_deg;
+        let sub_beams = vec![(-h / 2.0, 0.0), (h / 2.0, 0.0), (0.0, v / 2.0)];
+        Self { world, motion, model, imu, seed, labels: Vec::new(), keep_labels: true, sub_beams, casts: 0 }
+    }
+
+    /// Stops collecting labels (benchmarks).
+    pub fn without_labels(mut self) -> Self {
+        self.keep_labels = false;
+        self
+    }
+
+    /// Labels of the packets filled since the last call.
+    pub fn take_labels(&mut self) -> Vec<PacketLabels> {
+        std::mem::take(&mut self.labels)
+    }
+
+    /// Rays cast so far.
+    pub fn casts(&self) -> u64 {
+        self.casts
+    }
+
+    fn echo(&self, d_sensor: &V3, hit: &Hit, rng: &mut SplitMix64, d_world: &V3) -> Option<(Return, u16)> {
+        let range = hit.t + rng.normal() * self.model.range_sigma_m;
+        let albedo = f64::from(hit.albedo);
+        // Dark surfaces fade out first: the return power falls as albedo / range^2.
+        let max_range = self.model.max_range_m * albedo.min(1.0).sqrt();
+        if range < self.model.min_range_m || range > max_range {
+            return None;
+        }
+        let cos_i = hit.normal.dot(d_world).abs();
+        let reflectivity = if albedo > 1.0 {
+            (DIFFUSE_MAX + 1.0 + (albedo - 1.0) * 100.0).min(255.0)
+        } else {
+            (albedo * cos_i * DIFFUSE_MAX).clamp(1.0, DIFFUSE_MAX)
+        };
+        let p = d_sensor * range;
+        Some((
+            Return { x_m: p.x as f32, y_m: p.y as f32, z_m: p.z as f32, reflectivity: reflectivity as u8, tag: 0 },
+            hit.label,
+        ))
+    }
+}
+
+/// Direction of a beam turned by small azimuth and elevation offsets (deg).
+fn offset_direction(t_ns: u64, line: usize, d_az: f64, d_el: f64) -> V3 {
+    let (az, el) = AviaPattern::angles_deg(t_ns, line);
+    let (sa, ca) = (az + d_az).to_radians().sin_cos();
+    let (se, ce) = (el + d_el).to_radians().sin_cos();
+    V3::new(ce * ca, ce * sa, se)
+}
+
+impl PointSource for AviaSim {
+    fn fill(&mut self, req: &FiringRequest, out: &mut Vec<Return>) {
+        let echoes = req.echoes.max(1);
+        let n = req.firings;
+        let t_first = req.first_ns as f64 * 1e-9;
+        let t_last = req.firing_ns(n.saturating_sub(1)) as f64 * 1e-9;
+        let (pose_a, pose_b) = (self.motion.lidar_pose(t_first), self.motion.lidar_pose(t_last));
+        // People move millimetres within one packet: pose them once.
+        let bodies: Vec<Body> = self.world.bodies_at((t_first + t_last) / 2.0);
+        let mut labels = Vec::with_capacity(n * echoes);
+        let mut rng = SplitMix64::new(hash2(self.seed, req.first_ns));
+        let max_cast = self.model.max_range_m;
+        for k in 0..n {
+            let t_ns = req.firing_ns(k);
+            let line = AviaPattern::line_of(req, k);
+            let f = if n > 1 { k as f64 / (n - 1) as f64 } else { 0.0 };
+            let origin = pose_a.translation.vector.lerp(&pose_b.translation.vector, f);
+            let rot: UnitQuaternion<f64> = pose_a.rotation.slerp(&pose_b.rotation, f);
+            let d_sensor = offset_direction(t_ns, line, 0.0, 0.0);
+            let d_world = rot * d_sensor;
+            let centre = self.world.cast(&origin, &d_world, max_cast, &bodies);
+            self.casts += 1;
+            if echoes == 1 {
+                match centre.and_then(|h| self.echo(&d_sensor, &h, &mut rng, &d_world)) {
+                    Some((r, label)) => {
+                        out.push(r);
+                        labels.push(label);
+                    }
+                    None => {
+                        out.push(Return::EMPTY);
+                        labels.push(LABEL_EMPTY);
+                    }
+                }
+                continue;
+            }
+            // Several echoes: what the rest of the beam's footprint sees, nearest first.
+            let mut hits: Vec<(Hit, V3, V3)> = centre.map(|h| (h, d_sensor, d_world)).into_iter().collect();
+            for &(da, de) in &self.sub_beams {
+                let ds = offset_direction(t_ns, line, da, de);
+                let dw = rot * ds;
+                self.casts += 1;
+                if let Some(h) = self.world.cast(&origin, &dw, max_cast, &bodies) {
+                    hits.push((h, ds, dw));
+                }
+            }
+            hits.sort_by(|a, b| a.0.t.total_cmp(&b.0.t));
+            let mut distinct: Vec<(Hit, V3, V3)> = Vec::with_capacity(echoes);
+            for h in hits {
+                if distinct.last().is_none_or(|l| h.0.t - l.0.t >= self.model.min_echo_separation_m) {
+                    distinct.push(h);
+                }
+            }
+            // First, then last (dual); first, middle, last (triple).
+            let picks: Vec<Option<&(Hit, V3, V3)>> = match (echoes, distinct.len()) {
+                (_, 0) => vec![None; echoes],
+                (2, n) => vec![distinct.first(), if n > 1 { distinct.last() } else { None }],
+                (_, n) => {
+                    let mut v = vec![distinct.first(), if n > 2 { distinct.get(1) } else { None }];
+                    v.push(if n > 1 { distinct.last() } else { None });
+                    v.truncate(echoes);
+                    v
+                }
+            };
+            for (i, pick) in picks.into_iter().enumerate() {
+                match pick.and_then(|(h, ds, dw)| self.echo(ds, h, &mut rng, dw)) {
+                    Some((mut r, label)) => {
+                        r.tag = ((i as u8 + 1) & 0x3) << 4;
+                        out.push(r);
+                        labels.push(label);
+                    }
+                    None => {
+                        out.push(Return::EMPTY);
+                        labels.push(LABEL_EMPTY);
+                    }
+                }
+            }
+        }
+        if self.keep_labels {
+            self.labels.push(PacketLabels { first_ns: req.first_ns, labels });
+        }
+    }
+
+    fn imu(&mut self, t_ns: u64) -> ImuSample {
+        let m = self.imu.sample(t_ns as f64 * 1e-9);
+        let g = |v: V3| [(v.x / GRAVITY_M_S2) as f32, (v.y / GRAVITY_M_S2) as f32, (v.z / GRAVITY_M_S2) as f32];
+        ImuSample {
+            gyro_rad_s: [m.gyro_rad_s.x as f32, m.gyro_rad_s.y as f32, m.gyro_rad_s.z as f32],
+            acc_g: g(m.accel_m_s2),
+        }
+    }
+}
+
+/// The Avia's internal IMU in its LiDAR frame (as in FAST-LIO's Avia configuration: LiDAR at
+/// (0.04165, 0.02326, -0.0284) m in the IMU frame, axes aligned).
+pub fn avia_lidar_imu() -> Isometry3<f64> {
+    Isometry3::translation(-0.04165, -0.02326, 0.0284)
+}

@@ -1,0 +1,18 @@
+//! The simulator: indoor scenes, an Avia-faithful scan pattern, IMUs, motion and ground truth,
+//! driving the mock devices over their real wire protocols.
+//!
+//! - [`scenario`]: the TOML scenario files (four shipped: lab, auditorium, tactical, corridor).
+//! - [`world`]: the scene as solids ([`shapes`], [`bvh`]) and people ([`human`]) to cast rays at.
+//! - [`motion`]: the omni base, the walking responder and the people, as smooth functions of time.
+//! - [`pattern`]: the Avia's rosette, fitted to a real Avia frame.
+//! - [`lidar`]: the simulated Avia, a [`crate::avia::PointSource`]; [`imu`]: the IMUs.
+
+pub mod bvh;
+pub mod human;
+pub mod imu;
+pub mod lidar;
+pub mod motion;
+pub mod pattern;
+pub mod scenario;
+pub mod shapes;
+pub mod world;

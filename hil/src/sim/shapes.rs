@@ -1,0 +1,246 @@
+//! The two solids every scene is made of, and their ray intersections: boxes turned about the
+//! vertical (walls, floors, furniture, doors) and capsules (people's limbs; a sphere is a capsule
+//! of zero length).
+
+use nalgebra::Vector3;
+
+pub type V3 = Vector3<f64>;
+
+/// What a ray hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit) ray.
+    pub t: f64,
+    /// Unit surface normal facing the ray.
+    pub normal: V3,
+    pub albedo: f32,
+    /// 0 for the building, k for person k.
+    pub label: u16,
+}
+
+/// An axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: V3,
+    pub max: V3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: V3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY),
+        max: V3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY),
+    };
+
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb { min: self.min.inf(&o.min), max: self.max.sup(&o.max) }
+    }
+
+    pub fn centre(&self) -> V3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Entry distance of a ray (`inv_d` = 1/d per axis) if it meets the box before `t_max`.
+    #[inline]
+    pub fn enter(&self, o: &V3, inv_d: &V3, t_max: f64) -> Option<f64> {
+        let mut t0 = 0.0f64;
+        let mut t1 = t_max;
+        for a in 0..3 {
+            let ta = (self.min[a] - o[a]) * inv_d[a];
+            let tb = (self.max[a] - o[a]) * inv_d[a];
+            let (lo, hi) = if ta < tb { (ta, tb) } else { (tb, ta) };
+            // NaN (0 * inf on a face) must not widen the interval: compare so NaN loses.
+            if lo > t0 {
+                t0 = lo;
+            }
+            if hi < t1 {
+                t1 = hi;
+            }
+            if t0 > t1 {
+                return None;
+            }
+        }
+        Some(t0)
+    }
+}
+
+/// A box turned by `yaw` about the vertical through its centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YawBox {
+    pub centre: V3,
+    pub half: V3,
+    cos: f64,
+    sin: f64,
+    pub albedo: f32,
+}
+
+impl YawBox {
+    pub fn new(centre: V3, size: V3, yaw_rad: f64, albedo: f32) -> Self {
+        let (sin, cos) = yaw_rad.sin_cos();
+        Self { centre, half: size * 0.5, cos, sin, albedo }
+    }
+
+    pub fn yaw_rad(&self) -> f64 {
+        self.sin.atan2(self.cos)
+    }
+
+    pub fn aabb(&self) -> Aabb {
+        let ex = (self.half.x * self.cos).abs() + (self.half.y * self.sin).abs();
+        let ey = (self.half.x * self.sin).abs() + (self.half.y * self.cos).abs();
+        let e = V3::new(ex, ey, self.half.z);
+        Aabb { min: self.centre - e, max: self.centre + e }
+    }
+
+    fn to_local(&self, v: &V3) -> V3 {
+        V3::new(self.cos * v.x + self.sin * v.y, -self.sin * v.x + self.cos * v.y, v.z)
+    }
+
+    fn to_world(&self, v: &V3) -> V3 {
+        V3::new(self.cos * v.x - self.sin * v.y, self.sin * v.x + self.cos * v.y, v.z)
+    }
+
+    /// Nearest entry of a ray from outside the box, before `t_max`.
+    #[inline]
+    pub fn intersect(&self, o: &V3, d: &V3, t_max: f64) -> Option<(f64, V3)> {
+        let lo = self.to_local(&(o - self.centre));
+        let ld = self.to_local(d);
+        let mut t0 = f64::NEG_INFINITY;
+        let mut t1 = t_max;
+        let mut axis = 0usize;
+        for a in 0..3 {
+            if ld[a].abs() < 1e-15 {
+                if lo[a].abs() > self.half[a] {
+                    return None;
+                }
+                continue;
+            }
+            let inv = 1.0 / ld[a];
+            let ta = (-self.half[a] - lo[a]) * inv;
+            let tb = (self.half[a] - lo[a]) * inv;
+            let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
+            if near > t0 {
+                t0 = near;
+                axis = a;
+            }
+            t1 = t1.min(far);
+            if t0 > t1 {
+                return None;
+            }
+        }
+        // A ray starting inside (t0 <= 0) sees no surface of this box.
+        if t0 <= 1e-9 {
+            return None;
+        }
+        let mut n = V3::zeros();
+        n[axis] = -ld[axis].signum();
+        Some((t0, self.to_world(&n)))
+    }
+}
+
+/// A capsule: all points within `radius` of the segment `a`-`b`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Capsule {
+    pub a: V3,
+    pub b: V3,
+    pub radius: f64,
+    pub albedo: f32,
+}
+
+impl Capsule {
+    pub fn aabb(&self) -> Aabb {
+        let r = V3::repeat(self.radius);
+        Aabb { min: self.a.inf(&self.b) - r, max: self.a.sup(&self.b) + r }
+    }
+
+    /// Nearest entry of a unit ray before `t_max`.
+    #[inline]
+    pub fn intersect(&self, o: &V3, d: &V3, t_max: f64) -> Option<(f64, V3)> {
+        let ba = self.b - self.a;
+        let oa = o - self.a;
+        let baba = ba.dot(&ba);
+        let bard = ba.dot(d);
+        let baoa = ba.dot(&oa);
+        let rdoa = d.dot(&oa);
+        let oaoa = oa.dot(&oa);
+        let r2 = self.radius * self.radius;
+        let mut best: Option<f64> = None;
+        if baba > 1e-18 {
+            // The cylinder's side.
+            let a = baba - bard * bard;
+            let b = baba * rdoa - baoa * bard;
+            let c = baba * oaoa - baoa * baoa - r2 * baba;
+            let h = b * b - a * c;
+            if a > 1e-18 && h >= 0.0 {
+                let t = (-b - h.sqrt()) / a;
+                let y = baoa + t * bard;
+                if t > 1e-9 && y > 0.0 && y < baba {
+                    best = Some(t);
+                }
+            }
+        }
+        if best.is_none() {
+            // The end caps (spheres at a and b).
+            for centre in [self.a, self.b] {
+                let oc = o - centre;
+                let b = oc.dot(d);
+                let c = oc.dot(&oc) - r2;
+                let h = b * b - c;
+                if h >= 0.0 {
+                    let t = -b - h.sqrt();
+                    if t > 1e-9 && best.is_none_or(|bt| t < bt) {
+                        best = Some(t);
+                    }
+                }
+            }
+        }
+        let t = best.filter(|&t| t < t_max)?;
+        let p = o + d * t;
+        let s = if baba > 1e-18 { ((p - self.a).dot(&ba) / baba).clamp(0.0, 1.0) } else { 0.0 };
+        let n = (p - (self.a + ba * s)).try_normalize(1e-12).unwrap_or(-d);
+        Some((t, n))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_hits_from_every_side_and_turned() {
+        let b = YawBox::new(V3::new(5.0, 0.0, 1.0), V3::new(2.0, 1.0, 2.0), 0.0, 0.5);
+        let (t, n) = b.intersect(&V3::new(0.0, 0.0, 1.0), &V3::x(), 100.0).unwrap_or_default();
+        assert!((t - 4.0).abs() < 1e-9 && (n - V3::new(-1.0, 0.0, 0.0)).norm() < 1e-9);
+        assert!(b.intersect(&V3::new(0.0, 0.0, 1.0), &V3::x(), 3.9).is_none());
+        assert!(b.intersect(&V3::new(0.0, 2.0, 1.0), &V3::x(), 100.0).is_none());
+        // Turned 90 deg: 1 m long along y now, 2 m wide along x... the near face is at x = 4.5.
+        let b = YawBox::new(V3::new(5.0, 0.0, 1.0), V3::new(2.0, 1.0, 2.0), std::f64::consts::FRAC_PI_2, 0.5);
+        let (t, _) = b.intersect(&V3::new(0.0, 0.0, 1.0), &V3::x(), 100.0).unwrap_or_default();
+        assert!((t - 4.5).abs() < 1e-9, "{t}");
+        let bb = b.aabb();
+        assert!((bb.min.x - 4.5).abs() < 1e-9 && (bb.max.y - 1.0).abs() < 1e-9);
+        // From inside: no hit.
+        assert!(b.intersect(&V3::new(5.0, 0.0, 1.0), &V3::x(), 100.0).is_none());
+    }
+
+    #[test]
+    fn capsule_side_and_caps() {
+        let c = Capsule { a: V3::new(3.0, 0.0, 0.0), b: V3::new(3.0, 0.0, 2.0), radius: 0.5, albedo: 0.3 };
+        let (t, n) = c.intersect(&V3::new(0.0, 0.0, 1.0), &V3::x(), 100.0).unwrap_or_default();
+        assert!((t - 2.5).abs() < 1e-9 && (n + V3::x()).norm() < 1e-9);
+        let (t, n) = c.intersect(&V3::new(3.0, 0.0, 5.0), &-V3::z(), 100.0).unwrap_or_default();
+        assert!((t - 2.5).abs() < 1e-9 && (n - V3::z()).norm() < 1e-9);
+        assert!(c.intersect(&V3::new(0.0, 0.6, 1.0), &V3::x(), 100.0).is_none());
+        let sphere = Capsule { a: V3::new(2.0, 0.0, 0.0), b: V3::new(2.0, 0.0, 0.0), radius: 1.0, albedo: 0.3 };
+        let (t, _) = sphere.intersect(&V3::zeros(), &V3::x(), 100.0).unwrap_or_default();
+        assert!((t - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn aabb_entry() {
+        let b = Aabb { min: V3::new(1.0, -1.0, -1.0), max: V3::new(2.0, 1.0, 1.0) };
+        let d = V3::x();
+        let inv = d.map(|v| 1.0 / v);
+        assert_eq!(b.enter(&V3::zeros(), &inv, 10.0), Some(1.0));
+        assert_eq!(b.enter(&V3::zeros(), &inv, 0.5), None);
+        assert_eq!(b.enter(&V3::new(0.0, 2.0, 0.0), &inv, 10.0), None);
+    }
+}
