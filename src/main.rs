@@ -34,6 +34,9 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Write the scans of a capture as point-cloud files.
     Export(cmd::export::Args),
+    /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
+    #[command(subcommand)]
+    Ptp(cmd::ptp::Command),
 }
 
 fn main() -> ExitCode {
@@ -51,6 +54,7 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Replay(a) => cmd::replay::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Ptp(c) => cmd::ptp::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

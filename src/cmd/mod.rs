@@ -6,6 +6,7 @@ pub mod export;
 pub mod inspect;
 pub mod livox;
 pub mod mock;
+pub mod ptp;
 pub mod rates;
 pub mod replay;
 

@@ -18,5 +18,7 @@ pub use error::{PtpError, Result};
 pub mod config;
 pub mod port;
 pub mod servo;
+pub mod status;
+pub mod transport;
 
 pub use config::{LocalTimescale, MasterConfig, PtpConfig, ServoConfig, SlaveConfig};

@@ -11,7 +11,9 @@ pub use actions::{log_interval, Action, Timer, TxTag};
 pub use master::{Master, MasterStats};
 pub use slave::{Slave, SlaveSample, SlaveState, SlaveStats};
 
-/// Either role, behind one interface for the transport.
+/// Either role, behind one interface for the transport. One exists per process, so the size
+/// difference between the variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 pub enum Port {
     Master(Master),
     Slave(Slave),

@@ -230,7 +230,7 @@ impl Slave {
         }
     }
 
-    fn from_selected(&self, h: &Header) -> bool {
+    fn is_selected_sender(&self, h: &Header) -> bool {
         self.selected == Some(h.source)
     }
 
@@ -238,7 +238,7 @@ impl Slave {
     pub fn handle_event(&mut self, bytes: &[u8], rx_ns: u64) -> Vec<Action> {
         let Some(m) = self.parse(bytes) else { return Vec::new() };
         let Body::Sync { origin } = m.body else { return Vec::new() };
-        if !self.from_selected(&m.header) {
+        if !self.is_selected_sender(&m.header) {
             return Vec::new();
         }
         self.stats.syncs += 1;
@@ -268,7 +268,7 @@ impl Slave {
                 self.masters.heard(m.header.source, a, m.header.flags, m.header.log_interval, rx_ns);
                 self.masters.expire(rx_ns, self.cfg.announce_receipt_timeout);
                 let mut out = self.reselect();
-                if self.from_selected(&m.header) {
+                if self.is_selected_sender(&m.header) {
                     let after = log_interval(m.header.log_interval)
                         .saturating_mul(self.cfg.announce_receipt_timeout as u32)
                         .saturating_add(Duration::from_millis(1));
@@ -276,7 +276,7 @@ impl Slave {
                 }
                 out
             }
-            Body::FollowUp { precise_origin } if self.from_selected(&m.header) => {
+            Body::FollowUp { precise_origin } if self.is_selected_sender(&m.header) => {
                 self.stats.follow_ups += 1;
                 let corr = m.header.correction.ns() as i128;
                 match self.pending_sync {
@@ -290,7 +290,7 @@ impl Slave {
                     }
                 }
             }
-            Body::DelayResp { receive, requesting } if self.from_selected(&m.header) && requesting == self.port => {
+            Body::DelayResp { receive, requesting } if self.is_selected_sender(&m.header) && requesting == self.port => {
                 let Some(mut req) = self.delay_req else { return Vec::new() };
                 if req.seq != m.header.sequence_id {
                     return Vec::new();
