@@ -238,10 +238,11 @@ impl Header {
 
     /// Parses the header and returns it with the declared messageLength.
     pub fn parse(bytes: &[u8]) -> Result<(Self, usize)> {
-        let b: &[u8; 34] = bytes
-            .get(..Self::WIRE_LEN)
-            .and_then(|s| s.try_into().ok())
-            .ok_or(PtpError::TooShort { what: "PTP header", need: Self::WIRE_LEN, have: bytes.len() })?;
+        let b: &[u8; 34] = bytes.get(..Self::WIRE_LEN).and_then(|s| s.try_into().ok()).ok_or(PtpError::TooShort {
+            what: "PTP header",
+            need: Self::WIRE_LEN,
+            have: bytes.len(),
+        })?;
         let version = PtpVersion::from_byte(b[1])?;
         let message_type = MessageType::from_nibble(b[0] & 0x0f)?;
         let length = u16::from_be_bytes([b[2], b[3]]) as usize;

@@ -62,10 +62,19 @@ pub struct Announce {
 /// What follows the header.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Body {
-    Sync { origin: PtpTimestamp },
-    DelayReq { origin: PtpTimestamp },
-    FollowUp { precise_origin: PtpTimestamp },
-    DelayResp { receive: PtpTimestamp, requesting: PortIdentity },
+    Sync {
+        origin: PtpTimestamp,
+    },
+    DelayReq {
+        origin: PtpTimestamp,
+    },
+    FollowUp {
+        precise_origin: PtpTimestamp,
+    },
+    DelayResp {
+        receive: PtpTimestamp,
+        requesting: PortIdentity,
+    },
     Announce(Announce),
     /// Peer delay, signaling or management: recognised, not decoded.
     Other,

@@ -169,7 +169,8 @@ impl Master {
             return Vec::new();
         }
         let Body::DelayReq { .. } = message.body else { return Vec::new() };
-        let mut h = self.header(MessageType::DelayResp, message.header.sequence_id, self.cfg.log_min_delay_req_interval);
+        let mut h =
+            self.header(MessageType::DelayResp, message.header.sequence_id, self.cfg.log_min_delay_req_interval);
         h.flags = self.flags(false);
         // 1588-2008 11.3.2: the Delay_Req's correction (residence times on the way) goes back.
         h.correction = Correction(message.header.correction.0);

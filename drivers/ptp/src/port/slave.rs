@@ -243,7 +243,11 @@ impl Slave {
         }
         self.stats.syncs += 1;
         self.log_sync_interval = m.header.log_interval;
-        let sync = PendingSync { seq: m.header.sequence_id, t2: rx_ns as i128, correction_ns: m.header.correction.ns() as i128 };
+        let sync = PendingSync {
+            seq: m.header.sequence_id,
+            t2: rx_ns as i128,
+            correction_ns: m.header.correction.ns() as i128,
+        };
         if !m.header.flags.two_step() {
             self.pending_sync = None;
             return self.complete_sync(sync, origin, 0);
@@ -290,7 +294,9 @@ impl Slave {
                     }
                 }
             }
-            Body::DelayResp { receive, requesting } if self.is_selected_sender(&m.header) && requesting == self.port => {
+            Body::DelayResp { receive, requesting }
+                if self.is_selected_sender(&m.header) && requesting == self.port =>
+            {
                 let Some(mut req) = self.delay_req else { return Vec::new() };
                 if req.seq != m.header.sequence_id {
                     return Vec::new();

@@ -229,8 +229,7 @@ fn better_master_wins_and_a_silent_one_is_dropped() {
 
     // Only the poor master now: it takes over once the good one's Announces time out.
     let poor = Port::Master(Master::new(MasterConfig { priority1: 200, ..fast_master(0) }, pid(1)));
-    let Port::Slave(s) = std::mem::replace(&mut net.ports[1], Port::Slave(Slave::new(fast_slave(0), pid(9))))
-    else {
+    let Port::Slave(s) = std::mem::replace(&mut net.ports[1], Port::Slave(Slave::new(fast_slave(0), pid(9)))) else {
         unreachable!()
     };
     let mut net2 = Net::new(vec![poor, Port::Slave(s)], vec![(0, 0.0); 2], vec![5_000; 2], 0);

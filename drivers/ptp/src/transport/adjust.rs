@@ -43,7 +43,9 @@ fn fd_to_clock_id(fd: i32) -> libc::clockid_t {
 impl ClockAdjuster {
     pub fn open(target: &AdjustTarget) -> Result<Self> {
         match target {
-            AdjustTarget::Realtime => Ok(Self { clock_id: libc::CLOCK_REALTIME, name: "CLOCK_REALTIME".into(), _phc: None }),
+            AdjustTarget::Realtime => {
+                Ok(Self { clock_id: libc::CLOCK_REALTIME, name: "CLOCK_REALTIME".into(), _phc: None })
+            }
             AdjustTarget::Phc(path) => {
                 let file = std::fs::OpenOptions::new()
                     .read(true)
@@ -64,7 +66,10 @@ impl ClockAdjuster {
         // SAFETY: clock_adjtime reads and writes the timex we own.
         let ret = unsafe { libc::clock_adjtime(self.clock_id, tx) };
         if ret < 0 {
-            return Err(PtpError::io(format!("clock_adjtime {what} on {}", self.name), std::io::Error::last_os_error()));
+            return Err(PtpError::io(
+                format!("clock_adjtime {what} on {}", self.name),
+                std::io::Error::last_os_error(),
+            ));
         }
         Ok(())
     }

@@ -120,8 +120,13 @@ pub async fn run_port(
     mut on_status: impl FnMut(&Port, &TransportStats),
     stop: impl Future<Output = ()>,
 ) -> Result<(Port, TransportStats)> {
-    let mut lp =
-        Loop { sockets, adjuster, timers: BTreeMap::new(), pending_tx: VecDeque::new(), stats: TransportStats::default() };
+    let mut lp = Loop {
+        sockets,
+        adjuster,
+        timers: BTreeMap::new(),
+        pending_tx: VecDeque::new(),
+        stats: TransportStats::default(),
+    };
     let start = port.start();
     lp.apply(&mut port, start).await;
     let mut status = tokio::time::interval_at(Instant::now() + Duration::from_secs(1), Duration::from_secs(1));

@@ -189,7 +189,10 @@ pub fn recv_tx_stamp(fd: RawFd) -> io::Result<Option<(u32, KernelStamps)>> {
     for_each_cmsg(&msg, |level, kind, data| {
         if level == libc::SOL_SOCKET && kind == libc::SCM_TIMESTAMPING {
             stamps = parse_scm_timestamping(data);
-        } else if level == libc::SOL_IP && kind == libc::IP_RECVERR && data.len() >= size_of::<libc::sock_extended_err>() {
+        } else if level == libc::SOL_IP
+            && kind == libc::IP_RECVERR
+            && data.len() >= size_of::<libc::sock_extended_err>()
+        {
             // SAFETY: length checked; read_unaligned copes with alignment.
             let ee: libc::sock_extended_err = unsafe { std::ptr::read_unaligned(data.as_ptr().cast()) };
             if ee.ee_errno == libc::ENOMSG as u32 && ee.ee_origin == libc::SO_EE_ORIGIN_TIMESTAMPING {
