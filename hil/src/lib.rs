@@ -4,10 +4,12 @@
 //!   streams point and IMU packets at the real rates, from a synthetic scene or a capture file,
 //!   with injectable faults. A sans-IO core ([`avia::AviaDevice`]) and a tokio transport
 //!   ([`avia::MockAvia`]).
+//! - [`motors`]: DJI C620 ESCs or CiA 402 drives behind a mock slcan adapter on a pty.
 //! - [`rng`]: the small deterministic PRNG behind every seeded choice.
 
 pub mod avia;
 pub mod error;
+pub mod motors;
 pub mod rng;
 pub mod sim;
 
