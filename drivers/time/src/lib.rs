@@ -3,6 +3,12 @@
 //! Device clocks are only comparable with each other after a clock model has mapped them onto a
 //! common clock, so the tag travels with every stamp and arithmetic across clocks is refused.
 
+pub mod error;
+pub mod model;
+
+pub use error::TimeError;
+pub use model::{ClockFit, ClockModel, ClockModelConfig, TimeAligner};
+
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::time::{SystemTime, UNIX_EPOCH};
