@@ -34,6 +34,8 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Write the scans of a capture as point-cloud files.
     Export(cmd::export::Args),
+    /// Simulate a scenario: the sensors through the mock devices, a pcap and the ground truth.
+    Sim(cmd::sim::Args),
     /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
     #[command(subcommand)]
     Ptp(cmd::ptp::Command),
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Replay(a) => cmd::replay::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Sim(a) => cmd::sim::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),
     };
     match result {

@@ -9,6 +9,7 @@ pub mod mock;
 pub mod ptp;
 pub mod rates;
 pub mod replay;
+pub mod sim;
 
 /// The tokio runtime every async subcommand runs on; two workers match the target machines.
 pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {

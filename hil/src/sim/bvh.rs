@@ -107,7 +107,8 @@ fn build_node(boxes: &mut [YawBox], start: usize, end: usize, nodes: &mut Vec<No
         2
     };
     let mid = (start + end) / 2;
-    boxes[start..end].select_nth_unstable_by(mid - start, |a, b| a.aabb().centre()[axis].total_cmp(&b.aabb().centre()[axis]));
+    boxes[start..end]
+        .select_nth_unstable_by(mid - start, |a, b| a.aabb().centre()[axis].total_cmp(&b.aabb().centre()[axis]));
     let left = build_node(boxes, start, mid, nodes);
     let right = build_node(boxes, mid, end, nodes);
     if let Some(n) = nodes.get_mut(index as usize) {
@@ -137,11 +138,8 @@ mod tests {
         for _ in 0..5000 {
             let o = V3::new(rng.next_f64() * 10.0 - 5.0, rng.next_f64() * 10.0 - 5.0, 1.0);
             let d = V3::new(rng.normal(), rng.normal(), rng.normal()).normalize();
-            let brute = boxes
-                .iter()
-                .filter_map(|b| b.intersect(&o, &d, 100.0))
-                .map(|(t, _)| t)
-                .fold(f64::INFINITY, f64::min);
+            let brute =
+                boxes.iter().filter_map(|b| b.intersect(&o, &d, 100.0)).map(|(t, _)| t).fold(f64::INFINITY, f64::min);
             let fast = bvh.cast(&o, &d, 100.0).map_or(f64::INFINITY, |h| h.t);
             assert!((brute - fast).abs() < 1e-9 || (brute.is_infinite() && fast.is_infinite()), "{brute} {fast}");
         }

@@ -14,7 +14,8 @@ use crate::sim::shapes::{Hit, V3};
 use crate::sim::world::World;
 use nalgebra::{Isometry3, UnitQuaternion};
 use starc_livox::data::{ImuSample, Return};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// Label of an empty return.
 pub const LABEL_EMPTY: u16 = u16::MAX;
@@ -36,35 +37,33 @@ pub struct AviaSim {
     model: AviaModel,
     imu: ImuSim,
     seed: u64,
-    /// Echoes per firing the device asked for last.
-    labels: Vec<PacketLabels>,
-    keep_labels: bool,
+    /// Where the labels of each filled packet go (the device owns the source, so the runner
+    /// reads them through this).
+    labels: Option<LabelSink>,
     /// Sub-beam offsets (azimuth, elevation) in degrees sampled across the beam's footprint.
     sub_beams: Vec<(f64, f64)>,
-    casts: u64,
+    casts: Arc<AtomicU64>,
 }
+
+/// Labels shared between a source and whoever writes them out.
+pub type LabelSink = Arc<Mutex<Vec<PacketLabels>>>;
 
 impl AviaSim {
     pub fn new(world: Arc<World>, motion: Arc<dyn Motion>, model: AviaModel, imu: ImuSim, seed: u64) -> Self {
         let [h, v] = model.divergence_deg;
         let sub_beams = vec![(-h / 2.0, 0.0), (h / 2.0, 0.0), (0.0, v / 2.0)];
-        Self { world, motion, model, imu, seed, labels: Vec::new(), keep_labels: true, sub_beams, casts: 0 }
+        Self { world, motion, model, imu, seed, labels: None, sub_beams, casts: Arc::new(AtomicU64::new(0)) }
     }
 
-    /// Stops collecting labels (benchmarks).
-    pub fn without_labels(mut self) -> Self {
-        self.keep_labels = false;
+    /// Collects the labels of every packet filled into `sink`.
+    pub fn with_labels(mut self, sink: LabelSink) -> Self {
+        self.labels = Some(sink);
         self
     }
 
-    /// Labels of the packets filled since the last call.
-    pub fn take_labels(&mut self) -> Vec<PacketLabels> {
-        std::mem::take(&mut self.labels)
-    }
-
-    /// Rays cast so far.
-    pub fn casts(&self) -> u64 {
-        self.casts
+    /// A counter of the rays cast, readable while the device owns the source.
+    pub fn cast_counter(&self) -> Arc<AtomicU64> {
+        self.casts.clone()
     }
 
     fn echo(&self, d_sensor: &V3, hit: &Hit, rng: &mut SplitMix64, d_world: &V3) -> Option<(Return, u16)> {
@@ -118,7 +117,7 @@ impl PointSource for AviaSim {
             let d_sensor = offset_direction(t_ns, line, 0.0, 0.0);
             let d_world = rot * d_sensor;
             let centre = self.world.cast(&origin, &d_world, max_cast, &bodies);
-            self.casts += 1;
+            self.casts.fetch_add(1, Ordering::Relaxed);
             if echoes == 1 {
                 match centre.and_then(|h| self.echo(&d_sensor, &h, &mut rng, &d_world)) {
                     Some((r, label)) => {
@@ -137,7 +136,7 @@ impl PointSource for AviaSim {
             for &(da, de) in &self.sub_beams {
                 let ds = offset_direction(t_ns, line, da, de);
                 let dw = rot * ds;
-                self.casts += 1;
+                self.casts.fetch_add(1, Ordering::Relaxed);
                 if let Some(h) = self.world.cast(&origin, &dw, max_cast, &bodies) {
                     hits.push((h, ds, dw));
                 }
@@ -174,8 +173,10 @@ impl PointSource for AviaSim {
                 }
             }
         }
-        if self.keep_labels {
-            self.labels.push(PacketLabels { first_ns: req.first_ns, labels });
+        if let Some(sink) = &self.labels {
+            // A poisoned lock only means a writer panicked; the labels are still whole.
+            let mut guard = sink.lock().unwrap_or_else(|e| e.into_inner());
+            guard.push(PacketLabels { first_ns: req.first_ns, labels });
         }
     }
 

@@ -8,11 +8,16 @@
 //! - [`lidar`]: the simulated Avia, a [`crate::avia::PointSource`]; [`imu`]: the IMUs.
 
 pub mod bvh;
+pub mod camera;
 pub mod human;
 pub mod imu;
+pub mod lan;
 pub mod lidar;
 pub mod motion;
 pub mod pattern;
+pub mod run;
 pub mod scenario;
 pub mod shapes;
+pub mod truth;
+pub mod wheels;
 pub mod world;

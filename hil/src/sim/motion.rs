@@ -67,7 +67,14 @@ pub struct Route {
 impl Route {
     /// A route through `waypoints` (x, y, yaw rad) starting to move at `t_start`, each leg as short
     /// as the limits allow, pausing `pause_s` after each.
-    fn new(waypoints: &[[f64; 3]], t_start: f64, max_speed: f64, max_accel: f64, max_yaw_rate: f64, pause_s: f64) -> Self {
+    fn new(
+        waypoints: &[[f64; 3]],
+        t_start: f64,
+        max_speed: f64,
+        max_accel: f64,
+        max_yaw_rate: f64,
+        pause_s: f64,
+    ) -> Self {
         let start = waypoints.first().copied().unwrap_or([0.0; 3]);
         let mut legs = Vec::new();
         let mut t = t_start;

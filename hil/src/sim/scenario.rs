@@ -581,7 +581,10 @@ impl Scenario {
             cuts.sort_by(|a, b| a.0.total_cmp(&b.0));
             for c in &cuts {
                 if c.0 < 0.0 || c.1 > len {
-                    return Err(fail(span.clone(), format!("opening {:.2}..{:.2} m outside the {len:.2} m wall", c.0, c.1)));
+                    return Err(fail(
+                        span.clone(),
+                        format!("opening {:.2}..{:.2} m outside the {len:.2} m wall", c.0, c.1),
+                    ));
                 }
             }
             if cuts.windows(2).any(|p| p[1].0 < p[0].1) {

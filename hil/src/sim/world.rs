@@ -87,7 +87,9 @@ impl World {
             let mut cuts: Vec<(f64, f64, f64, f64, bool)> = w
                 .doors
                 .iter()
-                .map(|d| (d.at_m - d.width_m / 2.0, d.at_m + d.width_m / 2.0, 0.0, d.height_m, d.state == DoorState::Closed))
+                .map(|d| {
+                    (d.at_m - d.width_m / 2.0, d.at_m + d.width_m / 2.0, 0.0, d.height_m, d.state == DoorState::Closed)
+                })
                 .chain(w.windows.iter().map(|o| {
                     (o.at_m - o.width_m / 2.0, o.at_m + o.width_m / 2.0, o.sill_m, o.sill_m + o.height_m, false)
                 }))
