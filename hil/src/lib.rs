@@ -5,10 +5,13 @@
 //!   with injectable faults. A sans-IO core ([`avia::AviaDevice`]) and a tokio transport
 //!   ([`avia::MockAvia`]).
 //! - [`motors`]: DJI C620 ESCs or CiA 402 drives behind a mock slcan adapter on a pty.
+//! - [`imu`]: serial IMUs (MicroStrain MIP, WitMotion) on a pty, answering commands and
+//!   config writes, with injectable faults.
 //! - [`rng`]: the small deterministic PRNG behind every seeded choice.
 
 pub mod avia;
 pub mod error;
+pub mod imu;
 pub mod motors;
 pub mod rng;
 pub mod sim;
