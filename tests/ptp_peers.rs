@@ -181,7 +181,19 @@ fn our_slave_measures_a_ptp4l_master() {
         &mut ns,
         &s,
         starc,
-        &["ptp", "slave", "--iface", &vb, "--free-running", "--delay-req-interval", "-3", "--seconds", "9"],
+        // --hw-timestamps: veth has no PTP clock, so this also proves the software fallback.
+        &[
+            "ptp",
+            "slave",
+            "--iface",
+            &vb,
+            "--free-running",
+            "--hw-timestamps",
+            "--delay-req-interval",
+            "-3",
+            "--seconds",
+            "9",
+        ],
     );
     wait_last(&mut ns, Duration::from_secs(15));
     let lines = ours.lock().map(|v| v.clone()).unwrap_or_default();
@@ -189,6 +201,7 @@ fn our_slave_measures_a_ptp4l_master() {
     report("ptp4l master -> starc slave", &f);
     let text = lines.join("\n");
     assert!(text.contains("measure-only"), "{text}");
+    assert!(text.contains("(software timestamps)"), "no fallback to software stamps:\n{text}");
     assert!(f.offsets.len() >= 5, "too few offset lines:\n{text}\nptp4l:\n{:?}", master_log.lock().map(|v| v.clone()));
     assert!(median_abs(&f.offsets) < 10_000, "median |offset| too large:\n{text}");
     assert!(f.delays.iter().all(|&d| d > 0 && d < 1_000_000), "path delays not sane:\n{text}");
