@@ -141,7 +141,7 @@ impl PtpSockets {
     pub async fn recv_general(&self, buf: &mut [u8]) -> io::Result<usize> {
         loop {
             let mut guard = self.general.readable().await?;
-            match guard.try_io(|fd| fd.get_ref().recv(unsafe_uninit(buf))) {
+            match guard.try_io(|fd| fd.get_ref().recv(as_uninit(buf))) {
                 Ok(r) => return r,
                 Err(_would_block) => continue,
             }
@@ -173,7 +173,7 @@ impl PtpSockets {
 }
 
 /// socket2's recv takes `&mut [MaybeUninit<u8>]`; an initialised buffer is a valid one.
-fn unsafe_uninit(buf: &mut [u8]) -> &mut [std::mem::MaybeUninit<u8>] {
+fn as_uninit(buf: &mut [u8]) -> &mut [std::mem::MaybeUninit<u8>] {
     // SAFETY: u8 and MaybeUninit<u8> have the same layout, and recv only writes bytes.
     unsafe { &mut *(buf as *mut [u8] as *mut [std::mem::MaybeUninit<u8>]) }
 }
