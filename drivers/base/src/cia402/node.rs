@@ -3,7 +3,8 @@
 //! Bring-up: NMT pre-operational; heartbeat producer time (0x1017); optionally the PDO mapping
 //! (RPDO1 = controlword + target velocity, TPDO1 = statusword + actual velocity, event-timer
 //! driven); 0x6060 = 3 (profile velocity) checked in 0x6061; target velocity 0; fault reset and
-//! the enable sequence 6 / 7 / 0x0F with the statusword read back after each step; NMT start.
+//! disable voltage, and the enable sequence 6 / 7 / 0x0F with the statusword read back after
+//! each step; NMT start.
 //! Then RPDO1 every control period, TPDO1 and heartbeats watched, EMCY decoded.
 
 use crate::cia402::drive::{controlword, object, DriveState, PROFILE_VELOCITY_MODE};
@@ -113,7 +114,10 @@ fn setup_steps(node: u8, c: &Cia402Config) -> Vec<Step> {
         Step::Write(a(object::MODES_OF_OPERATION, 0), Value::i8(PROFILE_VELOCITY_MODE)),
         Step::ExpectValue(a(object::MODES_DISPLAY, 0), i32::from(PROFILE_VELOCITY_MODE)),
         Step::Write(a(object::TARGET_VELOCITY, 0), Value::i32(0)),
+        // Fault reset acts only in Fault (rising edge of bit 7); disable voltage then brings any
+        // other state (quick stop active, enabled...) to switch-on disabled.
         cw(controlword::FAULT_RESET),
+        cw(controlword::DISABLE_VOLTAGE),
         Step::ExpectState(DriveState::SwitchOnDisabled),
         cw(controlword::SHUTDOWN),
         Step::ExpectState(DriveState::ReadyToSwitchOn),

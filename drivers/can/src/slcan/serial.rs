@@ -99,16 +99,18 @@ impl<S: AsyncRead + AsyncWrite + Unpin + Send> SlcanBus<S> {
         self.io.flush().await.map_err(|e| CanError::io("slcan flush", e))
     }
 
-    /// Reads until `duration` passes without more bytes, dropping replies (frames are kept).
+    /// Reads and drops whatever arrives for `duration` (replies to the flush, frames left over
+    /// from an earlier session), however busy the line is.
     async fn drain(&mut self, duration: Duration) -> Result<()> {
-        while let Ok(read) = tokio::time::timeout(duration, self.io.read(&mut self.buf)).await {
+        let deadline = tokio::time::Instant::now() + duration;
+        while let Ok(read) = tokio::time::timeout_at(deadline, self.io.read(&mut self.buf)).await {
             let n = read.map_err(|e| CanError::io("slcan read", e))?;
             if n == 0 {
                 return Err(CanError::Closed);
             }
             self.take(n);
         }
-        self.queue.retain(|item| matches!(item, HostItem::Event(_)));
+        self.queue.clear();
         Ok(())
     }
 

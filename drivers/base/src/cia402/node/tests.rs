@@ -33,7 +33,7 @@ impl Drive {
                             DriveState::SwitchOnDisabled
                         }
                         (DriveState::Fault, _) => DriveState::Fault,
-                        (_, controlword::FAULT_RESET) => DriveState::SwitchOnDisabled,
+                        (_, controlword::DISABLE_VOLTAGE) => DriveState::SwitchOnDisabled,
                         (DriveState::SwitchOnDisabled, controlword::SHUTDOWN) => DriveState::ReadyToSwitchOn,
                         (DriveState::ReadyToSwitchOn, controlword::SWITCH_ON) => DriveState::SwitchedOn,
                         (DriveState::SwitchedOn, controlword::ENABLE_OPERATION) => DriveState::OperationEnabled,
@@ -98,7 +98,7 @@ fn brings_a_faulted_drive_up_and_drives_it() {
     assert_eq!(d.state, DriveState::OperationEnabled);
     assert_eq!(sent.first().map(|f| f.to_string()), Some("000#8003".to_string()));
     assert!(sent.iter().any(|f| f.to_string() == "000#0103"), "NMT start");
-    // Controlwords in order: fault reset, 6, 7, 0x0F.
+    // Controlwords in order: fault reset, disable voltage, 6, 7, 0x0F.
     let cws: Vec<u16> = sent
         .iter()
         .filter_map(|f| match SdoRequest::parse(f) {
@@ -106,7 +106,7 @@ fn brings_a_faulted_drive_up_and_drives_it() {
             _ => None,
         })
         .collect();
-    assert_eq!(cws, vec![0x80, 0x06, 0x07, 0x0F]);
+    assert_eq!(cws, vec![0x80, 0x00, 0x06, 0x07, 0x0F]);
     // Running: RPDO1 with the inverted target in rpm (2 rad/s = 19.1 rpm).
     let last = sent.last().and_then(|f| VelocityCommand::parse(f).ok());
     assert_eq!(last, Some((3, VelocityCommand { controlword: 0x0F, target_velocity: -19 })));
