@@ -25,6 +25,9 @@ enum Command {
     /// Livox device tools.
     #[command(subcommand)]
     Livox(cmd::livox::Command),
+    /// Serial IMU tools (MicroStrain MIP, WitMotion).
+    #[command(subcommand)]
+    Imu(cmd::imu::Command),
     /// Mock devices that speak the real wire protocols.
     #[command(subcommand)]
     Mock(cmd::mock::Command),
@@ -53,6 +56,7 @@ fn main() -> ExitCode {
         Command::Devices(a) => cmd::devices::run(a),
         Command::Livox(c) => cmd::livox::run(c),
         Command::Mock(c) => cmd::mock::run(c),
+        Command::Imu(c) => cmd::imu::run(c),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Replay(a) => cmd::replay::run(a),
         Command::Export(a) => cmd::export::run(a),

@@ -15,6 +15,9 @@ use std::time::Duration;
 pub enum Command {
     /// A mock Livox Avia: broadcast, handshake, every command, points and IMU at the real rates.
     Avia(AviaArgs),
+    /// A mock serial IMU (MicroStrain MIP or WitMotion) on a pty: streams, answers MIP commands
+    /// and WitMotion config writes, with optional faults.
+    Imu(super::imu::MockArgs),
 }
 
 #[derive(clap::Args)]
@@ -125,6 +128,7 @@ impl AviaArgs {
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Avia(args) => avia(args),
+        Command::Imu(args) => super::imu::mock(args),
     }
 }
 

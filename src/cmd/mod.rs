@@ -3,6 +3,7 @@
 pub mod demo;
 pub mod devices;
 pub mod export;
+pub mod imu;
 pub mod inspect;
 pub mod livox;
 pub mod mock;

@@ -5,10 +5,9 @@ use crate::error::{HilError, Result};
 use std::path::{Path, PathBuf};
 use tokio_serial::{SerialPort, SerialStream};
 
-/// Both ends of a pty. The slave stays open here so that the master never sees a hang-up while
+/// A pty's slave side and link; [`Pty::open`] also hands out the master. The slave stays open here so that the master never sees a hang-up while
 /// no host program has the port open (bytes written meanwhile wait in the tty's buffer).
 pub struct Pty {
-    pub master: SerialStream,
     _slave: SerialStream,
     tty: PathBuf,
     link: Option<PathBuf>,
@@ -19,12 +18,14 @@ fn io(context: impl Into<String>, e: impl std::fmt::Display) -> HilError {
 }
 
 impl Pty {
-    /// Opens a raw (no echo, no line editing) pty pair; with `link`, a symlink at that path
+    /// Opens a raw (no echo, no line editing) pty pair and returns it with its master side; with `link`, a symlink at that path
     /// points to the slave (an existing symlink there is replaced; any other file is an error).
     /// Must be called inside a tokio runtime.
-    pub fn open(link: Option<&Path>) -> Result<Self> {
-        let (master, mut slave) = SerialStream::pair().map_err(|e| io("opening a pty pair", e))?;
-        slave.set_exclusive(false).map_err(|e| io("clearing TIOCEXCL on the pty slave", e))?;
+    pub fn open(link: Option<&Path>) -> Result<(Self, SerialStream)> {
+        // The slave is opened without TIOCEXCL or flock: a host program may open it exclusively
+        // (tokio-serial does by default). Its `set_exclusive(false)` would take a shared flock
+        // and lock such a host out.
+        let (master, slave) = SerialStream::pair().map_err(|e| io("opening a pty pair", e))?;
         let tty = PathBuf::from(slave.name().ok_or_else(|| io("pty slave", "no name"))?);
         let link = match link {
             Some(path) => {
@@ -38,7 +39,7 @@ impl Pty {
             }
             None => None,
         };
-        Ok(Self { master, _slave: slave, tty, link })
+        Ok((Self { _slave: slave, tty, link }, master))
     }
 
     /// The slave's device path.

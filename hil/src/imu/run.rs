@@ -31,6 +31,7 @@ use starc_imu::Protocol;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::{Instant, MissedTickBehavior};
@@ -211,14 +212,14 @@ impl MockImu {
     /// Opens the pty (and link) and starts the mock; must be called inside a tokio runtime.
     pub fn spawn(config: MockImuConfig, source: Box<dyn ImuSource>) -> Result<Self> {
         config.validate()?;
-        let pty = Pty::open(config.port.as_deref())?;
+        let (pty, master) = Pty::open(config.port.as_deref())?;
         let (tty, port) = (pty.tty().to_path_buf(), pty.port().to_path_buf());
         let epoch_ns = starc_time::Stamp::host_now().ns;
         let device = ImuDevice::new(config.device_config(epoch_ns), source);
         let (stats_tx, stats) = watch::channel(MockImuStats::default());
         let (stop_tx, stop_rx) = oneshot::channel();
         let tick = Duration::from_micros(config.tick_us);
-        let task = tokio::spawn(run(pty, device, tick, stats_tx, stop_rx));
+        let task = tokio::spawn(run(pty, master, device, tick, stats_tx, stop_rx));
         Ok(Self { tty, port, stats, stop: Some(stop_tx), task: Some(task) })
     }
 
@@ -257,64 +258,63 @@ impl Drop for MockImu {
 }
 
 async fn run(
-    mut pty: Pty,
+    pty: Pty,
+    master: tokio_serial::SerialStream,
     mut device: ImuDevice<Box<dyn ImuSource>>,
     tick: Duration,
     stats_tx: watch::Sender<MockImuStats>,
     mut stop: oneshot::Receiver<()>,
 ) -> Result<()> {
+    let name = pty.tty().display().to_string();
+    let io_err = |what: &str, e: std::io::Error| HilError::Io { context: format!("{what} {name}"), source: e };
+    // Through AsyncRead/AsyncWrite: tokio-serial's try_read/try_write never clear readiness.
+    let (mut reader, mut writer) = tokio::io::split(master);
     let start = Instant::now();
     let mut ticker = tokio::time::interval(tick);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
     let mut queue: VecDeque<u8> = VecDeque::with_capacity(MAX_QUEUED);
+    // The bytes of the write in progress (the queue changes while it waits).
+    let mut inflight: Vec<u8> = Vec::with_capacity(4096);
     let mut out = Vec::with_capacity(4096);
     let mut buf = vec![0u8; 4096];
     let mut stats = MockImuStats::default();
     let mut last_publish = Instant::now();
-    let name = pty.tty().display().to_string();
-    let io_err = |what: &str, e: std::io::Error| HilError::Io { context: format!("{what} {name}"), source: e };
+    // A full pty (no host reading) takes 0 bytes yet polls writable: wait for the next tick.
+    let mut full = false;
     loop {
-        // Write what the tty takes now; the rest waits for `writable`.
-        while !queue.is_empty() {
-            let (front, _) = queue.as_slices();
-            match pty.master.try_write(front) {
-                Ok(n) => {
-                    queue.drain(..n);
-                    stats.bytes_written += n as u64;
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(io_err("writing", e)),
-            }
+        if inflight.is_empty() {
+            let n = queue.len().min(4096);
+            inflight.extend(queue.drain(..n));
         }
-        let want_write = !queue.is_empty();
+        let want_write = !inflight.is_empty() && !full;
         tokio::select! {
             _ = ticker.tick() => {
+                full = false;
                 let now_ns = start.elapsed().as_nanos() as u64;
                 device.poll(now_ns, &mut out);
             }
-            r = pty.master.readable() => {
-                r.map_err(|e| io_err("waiting to read", e))?;
-                loop {
-                    match pty.master.try_read(&mut buf) {
-                        Ok(0) => break,
-                        Ok(n) => {
-                            stats.host_bytes += n as u64;
-                            let now_ns = start.elapsed().as_nanos() as u64;
-                            device.receive(buf.get(..n).unwrap_or_default(), now_ns, &mut out);
-                        }
-                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                        Err(e) => return Err(io_err("reading", e)),
-                    }
+            r = reader.read(&mut buf) => match r {
+                Ok(0) => return Err(io_err("reading", std::io::ErrorKind::UnexpectedEof.into())),
+                Ok(n) => {
+                    stats.host_bytes += n as u64;
+                    let now_ns = start.elapsed().as_nanos() as u64;
+                    device.receive(buf.get(..n).unwrap_or_default(), now_ns, &mut out);
                 }
-            }
-            r = pty.master.writable(), if want_write => {
-                r.map_err(|e| io_err("waiting to write", e))?;
-            }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(io_err("reading", e)),
+            },
+            r = writer.write(&inflight), if want_write => match r {
+                Ok(0) => full = true,
+                Ok(n) => {
+                    inflight.drain(..n.min(inflight.len()));
+                    stats.bytes_written += n as u64;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(io_err("writing", e)),
+            },
             _ = &mut stop => break,
         }
-        let room = MAX_QUEUED.saturating_sub(queue.len());
+        let room = MAX_QUEUED.saturating_sub(queue.len() + inflight.len());
         let take = out.len().min(room);
         queue.extend(out.drain(..take));
         stats.bytes_dropped += out.len() as u64;
@@ -327,5 +327,6 @@ async fn run(
     }
     stats.device = device.stats();
     stats_tx.send_replace(stats);
+    drop(pty);
     Ok(())
 }

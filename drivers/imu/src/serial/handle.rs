@@ -172,11 +172,24 @@ impl ImuHandle {
         }
     }
 
-    /// Streams accel + gyro at `rate_hz` (rounded to base rate / decimation); returns the rate set.
+    /// The current IMU message format (0x80 fields and their decimations).
+    pub async fn mip_format(&self) -> Result<Vec<FormatEntry>> {
+        match self.mip_command(MipCommand::ImuMessageFormat(Function::Read)).await?.data {
+            Some(ReplyData::ImuMessageFormat(entries)) => Ok(entries),
+            _ => Err(ImuError::BadValue { field: "MIP message format reply", value: 0 }),
+        }
+    }
+
+    /// Streams the current fields (accel + gyro when none or unreadable) at `rate_hz`, rounded to
+    /// base rate / decimation; returns the rate set.
     pub async fn set_mip_rate(&self, rate_hz: f64) -> Result<f64> {
         let base = self.mip_base_rate().await?;
         let decimation = mip_decimation(base, rate_hz)?;
-        let entries = [FIELD_ACCEL, FIELD_GYRO].map(|descriptor| FormatEntry { descriptor, decimation }).to_vec();
+        let mut descriptors: Vec<u8> = self.mip_format().await.unwrap_or_default().iter().map(|e| e.descriptor).collect();
+        if descriptors.is_empty() {
+            descriptors = vec![FIELD_ACCEL, FIELD_GYRO];
+        }
+        let entries = descriptors.into_iter().map(|descriptor| FormatEntry { descriptor, decimation }).collect();
         self.mip_command(MipCommand::ImuMessageFormat(Function::Apply(entries))).await?;
         Ok(f64::from(base) / f64::from(decimation))
     }

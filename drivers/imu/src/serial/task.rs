@@ -114,8 +114,8 @@ impl Task {
     }
 
     async fn write(&mut self, bytes: &[u8], stats: &mut PortStats) -> Result<()> {
+        // No flush: on a tty it is tcdrain, which would block the runtime until sent.
         self.port.write_all(bytes).await.map_err(|e| ImuError::io(format!("writing {}", self.name), e))?;
-        self.port.flush().await.map_err(|e| ImuError::io(format!("flushing {}", self.name), e))?;
         stats.bytes_written += bytes.len() as u64;
         Ok(())
     }
