@@ -42,6 +42,9 @@ enum Command {
     /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
     #[command(subcommand)]
     Ptp(cmd::ptp::Command),
+    /// The omni-wheel base over CAN: status, keyboard teleop.
+    #[command(subcommand)]
+    Base(cmd::base::Command),
 }
 
 fn main() -> ExitCode {
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Sim(a) => cmd::sim::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),
+        Command::Base(c) => cmd::base::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -15,6 +15,8 @@ use std::time::Duration;
 pub enum Command {
     /// A mock Livox Avia: broadcast, handshake, every command, points and IMU at the real rates.
     Avia(AviaArgs),
+    /// Mock motor controllers (DJI C620 or CiA 402) behind an slcan adapter on a pty, with faults.
+    Motors(super::base::MockArgs),
     /// A mock serial IMU (MicroStrain MIP or WitMotion) on a pty: streams, answers MIP commands
     /// and WitMotion config writes, with optional faults.
     Imu(super::imu::MockArgs),
@@ -128,6 +130,7 @@ impl AviaArgs {
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Avia(args) => avia(args),
+        Command::Motors(args) => super::base::mock(args),
         Command::Imu(args) => super::imu::mock(args),
     }
 }

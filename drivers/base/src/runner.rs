@@ -2,11 +2,14 @@
 //! status polls. Received frames are re-stamped on a monotonic clock anchored to the host
 //! realtime clock at start, so watchdog and time-outs never see NTP steps.
 
+use crate::config::CanConfig;
 use crate::controller::{Base, BaseEvent, BaseStatus};
 use crate::error::{BaseError, Result};
 use crate::kinematics::Twist;
 use crate::safety::{ClearRefused, Fault};
-use starc_can::{BusEvent, BusStats, CanBus, CanFrame};
+use starc_can::slcan::SlcanSerial;
+use starc_can::socketcan::SocketCanBus;
+use starc_can::{AnyBus, BusEvent, BusStats, CanBus, CanFrame};
 use starc_time::Stamp;
 use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -64,6 +67,19 @@ pub struct BaseHandle {
 pub struct RunnerOptions {
     /// Poll the adapter's status this often (slcan `F`); `None` = never.
     pub status_poll: Option<Duration>,
+}
+
+/// Opens the transport a config names, with the runner options that suit it.
+pub async fn open_bus(config: &CanConfig) -> Result<(AnyBus, RunnerOptions)> {
+    Ok(match config {
+        CanConfig::Socketcan { interface } => {
+            (AnyBus::SocketCan(SocketCanBus::open(interface)?), RunnerOptions { status_poll: None })
+        }
+        CanConfig::Slcan { port, slcan, status_poll_ms } => {
+            let poll = (*status_poll_ms > 0).then(|| Duration::from_millis(*status_poll_ms));
+            (AnyBus::Slcan(SlcanSerial::open_serial(port, slcan).await?), RunnerOptions { status_poll: poll })
+        }
+    })
 }
 
 /// Starts the loop; events arrive on the returned receiver (dropped, and counted, when it is full).

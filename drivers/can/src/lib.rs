@@ -9,12 +9,14 @@
 //!
 //! Parsers take untrusted bytes and return [`CanError`]; they never panic.
 
+pub mod any;
 pub mod bus;
 pub mod error;
 pub mod frame;
 pub mod slcan;
 pub mod socketcan;
 
+pub use any::AnyBus;
 pub use bus::{BusEvent, BusFault, BusStats, CanBus, RxFrame};
 pub use error::{CanError, Result};
 pub use frame::{CanFrame, CanId};
