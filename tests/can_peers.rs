@@ -74,10 +74,14 @@ async fn python_can_drives_the_c620_mock() {
     assert_eq!(rpm("3"), 0.0);
     assert_eq!(v["last"]["1"]["current_raw"], 3277);
     assert_eq!(v["last"]["2"]["current_raw"], -1638);
+    // What python-can keeps up with (about 590 Hz per ESC here when idle; less under load).
     for esc in ["1", "2", "3"] {
         let hz = v["feedback_hz"][esc].as_f64().unwrap();
-        assert!(hz > 500.0, "ESC {esc}: feedback at {hz} Hz, the C620 sends 1 kHz");
+        assert!(hz > 100.0, "ESC {esc}: python-can read feedback at {hz} Hz");
     }
+    // What the mock sent: 1 kHz per ESC for the ~1.5 s the channel was open.
+    println!("mock {stats:?}");
+    assert!(stats.adapter.frames_to_host > 3900, "{stats:?}");
     assert!(stats.c620_commands > 100, "{stats:?}");
     assert_eq!(stats.adapter.frames_from_host, stats.c620_commands);
 }

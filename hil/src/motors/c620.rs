@@ -83,11 +83,23 @@ impl MockC620 {
             let after = esc.speed.step(target, dt);
             esc.rotor_turns += 0.5 * (before + after) * dt / TAU * M3508_GEAR_RATIO;
         }
-        // Feedback is due every period; after a stall (a slow host) only the latest is sent.
-        if now_ns < self.next_feedback_ns {
-            return;
+        // Feedback is due every period. A late wake-up (the host timer is only good to about a
+        // millisecond) sends the missed ones at once, up to a few; after a longer stall the
+        // schedule restarts from now.
+        let mut due = 0;
+        while self.next_feedback_ns <= now_ns && due < 5 {
+            due += 1;
+            self.next_feedback_ns += self.period_ns;
         }
-        self.next_feedback_ns = (now_ns / self.period_ns + 1) * self.period_ns;
+        if self.next_feedback_ns <= now_ns {
+            self.next_feedback_ns = (now_ns / self.period_ns + 1) * self.period_ns;
+        }
+        for _ in 0..due {
+            self.push_feedback(out);
+        }
+    }
+
+    fn push_feedback(&self, out: &mut Vec<CanFrame>) {
         for esc in self.escs.iter().filter(|e| !e.dead) {
             let rotor_rpm = esc.speed.value * M3508_GEAR_RATIO * 60.0 / TAU;
             let angle = (esc.rotor_turns.rem_euclid(1.0) * f64::from(ANGLE_COUNTS)) as u16 % ANGLE_COUNTS;
@@ -126,6 +138,13 @@ mod tests {
         assert!((by_id(1).output_rad_s(M3508_GEAR_RATIO) - 10.0).abs() < 0.05, "{:?}", by_id(1));
         assert!((by_id(2).output_rad_s(M3508_GEAR_RATIO) + 5.0).abs() < 0.05);
         assert_eq!(by_id(5).rotor_rpm, 0);
+        // Late, uneven wake-ups still give 1 kHz on average.
+        let mut late = MockC620::new(&[1], 1000.0, 0.05);
+        let mut n = Vec::new();
+        for k in 0..400u64 {
+            late.poll(k * 2_500_000 + (k % 3) * 300_000, &mut n);
+        }
+        assert!((995..=1001).contains(&n.len()), "{}", n.len());
         m.kill(2);
         out.clear();
         m.poll(501_000_000, &mut out);
