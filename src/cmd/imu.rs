@@ -185,16 +185,8 @@ fn print_window(args: &MonitorArgs, t: f64, dt: f64, w: &Window, s: &PortStats, 
         println!("{v}");
         return;
     }
-    println!(
-        "{t:6.1} s  {rate:7.1} Hz  gyro mean {} std {} rad/s",
-        v3(&mean[..3]),
-        v3(&std[..3]),
-    );
-    println!(
-        "           accel mean {} std {} m/s^2",
-        v3(&mean[3..]),
-        v3(&std[3..]),
-    );
+    println!("{t:6.1} s  {rate:7.1} Hz  gyro mean {} std {} rad/s", v3(&mean[..3]), v3(&std[..3]),);
+    println!("           accel mean {} std {} m/s^2", v3(&mean[3..]), v3(&std[3..]),);
     println!(
         "           bad checksums {}  resyncs {}  skipped {} B  dropped {}  incomplete {}  samples {}",
         d.bad_checksums, d.resyncs, d.skipped_bytes, dropped, d.incomplete, d.samples
@@ -286,9 +278,11 @@ impl MockArgs {
         if let Some(s) = self.seed {
             c.seed = s;
         }
-        for (flag, field) in
-            [(self.garbage, &mut c.faults.garbage), (self.drop, &mut c.faults.drop), (self.corrupt, &mut c.faults.corrupt)]
-        {
+        for (flag, field) in [
+            (self.garbage, &mut c.faults.garbage),
+            (self.drop, &mut c.faults.drop),
+            (self.corrupt, &mut c.faults.corrupt),
+        ] {
             if let Some(v) = flag {
                 *field = v;
             }

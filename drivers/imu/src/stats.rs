@@ -30,8 +30,8 @@ pub struct DecoderStats {
 /// Counts samples missing from a stream from the gaps between their times.
 ///
 /// The period is the mean interval over a sliding window of recent samples, or a fixed nominal
-/// period when the rate is known. An interval over 1.5 periods counts `round(interval / period)
-/// - 1` missing samples. Exact on a device clock (MIP GPS time, the WitMotion time frame); on
+/// period when the rate is known. An interval over 1.5 periods counts
+/// `round(interval / period) - 1` missing samples. Exact on a device clock (MIP GPS time, the WitMotion time frame); on
 /// host receive times it is only as good as their spacing: a USB adapter that delivers several
 /// samples per read makes long intervals that look like losses.
 #[derive(Clone, Debug)]

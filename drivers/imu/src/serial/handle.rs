@@ -16,7 +16,7 @@ use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tokio_serial::SerialPortBuilderExt;
+use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
 /// Counters of a port: its decoder's and the transport's.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -42,6 +42,13 @@ impl ImuPort {
             .timeout(Duration::from_millis(100))
             .open_native_async()
             .map_err(|source| ImuError::Serial { port: config.port.clone(), source })?;
+        Self::from_stream(port, config)
+    }
+
+    /// Runs the task on a port opened elsewhere (e.g. the master side of a pty); `config.port`
+    /// only names it.
+    pub fn from_stream(port: SerialStream, config: &ImuConfig) -> Result<(ImuHandle, mpsc::Receiver<ImuEvent>)> {
+        config.validate()?;
         let mut timestamper = Timestamper::new(config.latency());
         if let Some(map) = config.clock_map {
             timestamper = timestamper.with_map(Arc::new(map));
@@ -107,7 +114,7 @@ impl ImuHandle {
         &self.port
     }
 
-    /// The latest counters (updated every 20 ms while bytes flow).
+    /// The latest counters (at most 50 ms old).
     pub fn stats(&self) -> PortStats {
         *self.stats.borrow()
     }
@@ -185,7 +192,8 @@ impl ImuHandle {
     pub async fn set_mip_rate(&self, rate_hz: f64) -> Result<f64> {
         let base = self.mip_base_rate().await?;
         let decimation = mip_decimation(base, rate_hz)?;
-        let mut descriptors: Vec<u8> = self.mip_format().await.unwrap_or_default().iter().map(|e| e.descriptor).collect();
+        let mut descriptors: Vec<u8> =
+            self.mip_format().await.unwrap_or_default().iter().map(|e| e.descriptor).collect();
         if descriptors.is_empty() {
             descriptors = vec![FIELD_ACCEL, FIELD_GYRO];
         }

@@ -52,6 +52,8 @@ impl Task {
         let mut queue: VecDeque<(MipCommand, oneshot::Sender<Result<MipReply>>)> = VecDeque::new();
         let mut stats = PortStats::default();
         let mut last_publish = Instant::now();
+        // Counters go out at least this often, also when nothing arrives.
+        let mut publish = tokio::time::interval(Duration::from_millis(50));
         loop {
             if pending.is_none() {
                 if let Some((command, reply)) = queue.pop_front() {
@@ -99,6 +101,11 @@ impl Task {
                         let _ = reply.send(r);
                     }
                 },
+                _ = publish.tick() => {
+                    stats.decoder = self.decoder.stats();
+                    self.stats.send_replace(stats);
+                    last_publish = Instant::now();
+                }
                 _ = sleep_until(deadline) => {
                     if let Some(p) = pending.take() {
                         pending = self.retry(p, &mut stats).await;
