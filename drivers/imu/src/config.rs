@@ -92,3 +92,38 @@ impl ImuConfig {
 fn toml_from_str(text: &str) -> Result<ImuConfig> {
     toml::from_str(text).map_err(|e| ImuError::config("toml", e.to_string()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_example_loads() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/imu.toml");
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let c = ImuConfig::from_toml(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (c.port.as_str(), c.protocol, c.baud, c.rate_hz),
+            ("/dev/starc-imu", Protocol::Mip, 115_200, Some(200.0))
+        );
+        assert_eq!(c.clock_map, None);
+        let uncommented = text
+            .replace("# [clock_map]", "[clock_map]")
+            .replace("# target", "target")
+            .replace("# offset_ns", "offset_ns");
+        let c = ImuConfig::from_toml(&uncommented).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(c.clock_map.map(|m| m.offset_ns), Some(-37_000_000_000));
+    }
+
+    #[test]
+    fn typos_and_bad_values_are_refused() {
+        assert!(ImuConfig::from_toml("prot = \"mip\"").is_err());
+        assert!(ImuConfig::from_toml("protocol = \"nmea\"").is_err());
+        assert!(ImuConfig::from_toml("rate_hz = -1.0").is_err());
+        assert!(ImuConfig::from_toml("baud = 0").is_err());
+        assert_eq!(
+            ImuConfig::from_toml("protocol = \"witmotion\"").map(|c| c.protocol).ok(),
+            Some(Protocol::WitMotion)
+        );
+    }
+}
