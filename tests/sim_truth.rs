@@ -53,7 +53,18 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
     simulate("corridor", 2.5, 7, &a, true);
     simulate("corridor", 2.5, 7, &b, true);
     simulate("corridor", 2.5, 8, &c, true);
-    for file in ["avia.pcap", "labels_robot.bin", "labels_fpv.bin", "gt_robot.tum", "gt_fpv.tum", "people.csv", "robot_imu_external.csv", "robot_wheels.csv", "camera/frames.csv", "extrinsics.json"] {
+    for file in [
+        "avia.pcap",
+        "labels_robot.bin",
+        "labels_fpv.bin",
+        "gt_robot.tum",
+        "gt_fpv.tum",
+        "people.csv",
+        "robot_imu_external.csv",
+        "robot_wheels.csv",
+        "camera/frames.csv",
+        "extrinsics.json",
+    ] {
         let (x, y) = (std::fs::read(a.join(file)).unwrap(), std::fs::read(b.join(file)).unwrap());
         assert!(x == y, "{file} differs between two runs with the same seed");
     }
@@ -248,14 +259,10 @@ yaw_deg = 0
             }
             person_points[usize::from(label)] += 1;
             let t = t0 + u64::from(p.offset_ns);
-            let w = pose_at(&tum, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
+            let w =
+                pose_at(&tum, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
             // The box of this person at the nearest 100 ms.
-            let b = boxes
-                .iter()
-                .filter(|(_, lb, _)| *lb == label)
-                .min_by_key(|(bt, _, _)| bt.abs_diff(t))
-                .unwrap()
-                .2;
+            let b = boxes.iter().filter(|(_, lb, _)| *lb == label).min_by_key(|(bt, _, _)| bt.abs_diff(t)).unwrap().2;
             let (s, c) = b[6].sin_cos();
             let (dx, dy) = (w.x - b[0], w.y - b[1]);
             let local = [c * dx + s * dy, -s * dx + c * dy, w.z - b[2]];
