@@ -37,15 +37,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         hits += u64::from(world.cast(&pose.translation.vector, &d, 400.0, &bodies).is_some());
     }
     let secs = start.elapsed().as_secs_f64();
-    println!("ray caster: {:.2} M rays/s ({} rays, {:.1} % hit) in {secs:.2} s", n as f64 / secs / 1e6, n, 100.0 * hits as f64 / n as f64);
+    println!(
+        "ray caster: {:.2} M rays/s ({} rays, {:.1} % hit) in {secs:.2} s",
+        n as f64 / secs / 1e6,
+        n,
+        100.0 * hits as f64 / n as f64
+    );
 
     // The whole device: Risley pattern, ray casting, noise, labels, packetizing, the control
     // protocol and the pcap, for one Avia on the robot's route.
-    for (mode, label) in [(starc_hil::avia::ReturnSetting::Single, "single"), (starc_hil::avia::ReturnSetting::Dual, "dual")] {
+    for (mode, label) in
+        [(starc_hil::avia::ReturnSetting::Single, "single"), (starc_hil::avia::ReturnSetting::Dual, "dual")]
+    {
         let sim_s = 10.0;
         let imu = ImuSim::new(motion.clone(), avia_lidar_imu(), scenario.imu.internal, 200.0, 0.0, 3);
         let labels = Arc::new(std::sync::Mutex::new(Vec::new()));
-        let source = AviaSim::new(world.clone(), motion.clone(), scenario.avia.clone(), imu, 9).with_labels(labels.clone());
+        let source =
+            AviaSim::new(world.clone(), motion.clone(), scenario.avia.clone(), imu, 9).with_labels(labels.clone());
         let mut code = [0u8; 16];
         code[..15].copy_from_slice(b"3GGDJ8E00100101");
         let mut link = AviaLink::new(
@@ -64,9 +72,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         while t <= (sim_s * 1e9) as u64 {
             link.step(t, &mut |w| {
                 bytes += w.payload.len();
-                pcap.write_udp(w.time_ns, w.src, w.dst, w.payload).map_err(|e| starc_hil::HilError::config("pcap", e.to_string()))
+                pcap.write_udp(w.time_ns, w.src, w.dst, w.payload)
+                    .map_err(|e| starc_hil::HilError::config("pcap", e.to_string()))
             })?;
-            if t % 100_000_000 == 0 {
+            if t.is_multiple_of(100_000_000) {
                 labels.lock().map_err(|_| "poisoned")?.clear();
             }
             t += 100_000;

@@ -50,37 +50,51 @@ impl Bvh {
         let inv = d.map(|v| 1.0 / v);
         let mut best: Option<Hit> = None;
         let mut limit = t_max;
-        let mut stack = [0u32; 64];
-        let mut top = 1usize;
+        // (node, its entry distance): a node is skipped when a nearer hit was found meanwhile.
+        let mut stack = [(0u32, 0.0f64); 64];
+        let mut top = 0usize;
+        if let Some(root) = self.nodes.first() {
+            if let Some(t) = root.bounds.enter(o, &inv, limit) {
+                stack[0] = (0, t);
+                top = 1;
+            }
+        }
         while top > 0 {
             top -= 1;
-            let Some(node) = self.nodes.get(stack[top] as usize) else { continue };
-            if node.bounds.enter(o, &inv, limit).is_none() {
+            let (index, t_enter) = stack[top];
+            if t_enter > limit {
                 continue;
             }
+            let Some(node) = self.nodes.get(index as usize) else { continue };
             if node.count > 0 {
                 let (a, b) = (node.first as usize, (node.first + node.count) as usize);
                 for bx in self.boxes.get(a..b).unwrap_or(&[]) {
-                    if let Some((t, normal)) = bx.intersect(o, d, limit) {
+                    if let Some((t, normal)) = bx.intersect_inv(o, d, &inv, limit) {
                         limit = t;
                         best = Some(Hit { t, normal, albedo: bx.albedo, label: 0 });
                     }
                 }
             } else if top + 2 <= stack.len() {
+                let enter = |i: u32| self.nodes.get(i as usize).and_then(|n| n.bounds.enter(o, &inv, limit));
                 let (l, r) = (node.first, node.right);
-                // Visit the nearer child first so the far one is usually culled.
-                let near_first = match (self.nodes.get(l as usize), self.nodes.get(r as usize)) {
-                    (Some(ln), Some(rn)) => {
-                        let tl = ln.bounds.enter(o, &inv, limit).unwrap_or(f64::INFINITY);
-                        let tr = rn.bounds.enter(o, &inv, limit).unwrap_or(f64::INFINITY);
-                        tl <= tr
+                match (enter(l), enter(r)) {
+                    (Some(tl), Some(tr)) => {
+                        // The nearer child on top, so the far one is usually culled.
+                        let (near, far) = if tl <= tr { ((l, tl), (r, tr)) } else { ((r, tr), (l, tl)) };
+                        stack[top] = far;
+                        stack[top + 1] = near;
+                        top += 2;
                     }
-                    _ => true,
-                };
-                let (first, second) = if near_first { (l, r) } else { (r, l) };
-                stack[top] = second;
-                stack[top + 1] = first;
-                top += 2;
+                    (Some(t), None) => {
+                        stack[top] = (l, t);
+                        top += 1;
+                    }
+                    (None, Some(t)) => {
+                        stack[top] = (r, t);
+                        top += 1;
+                    }
+                    (None, None) => {}
+                }
             }
         }
         best
@@ -132,7 +146,7 @@ mod tests {
         for _ in 0..300 {
             let c = V3::new(rng.next_f64() * 40.0 - 20.0, rng.next_f64() * 40.0 - 20.0, rng.next_f64() * 3.0);
             let s = V3::new(0.1 + rng.next_f64() * 2.0, 0.1 + rng.next_f64() * 2.0, 0.1 + rng.next_f64() * 2.0);
-            boxes.push(YawBox::new(c, s, rng.next_f64() * 6.28, 0.5));
+            boxes.push(YawBox::new(c, s, rng.next_f64() * std::f64::consts::TAU, 0.5));
         }
         let bvh = Bvh::build(boxes.clone());
         for _ in 0..5000 {
