@@ -5,48 +5,17 @@
 //! Broadcasts and non-loopback addresses exist only inside namespaces this test creates and
 //! removes. It needs root (CI runs as root); elsewhere it says it skipped.
 
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
-struct Namespaces {
-    names: Vec<String>,
-    children: Vec<Child>,
-}
-
-impl Drop for Namespaces {
-    fn drop(&mut self) {
-        for c in &mut self.children {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-        for n in &self.names {
-            let _ = Command::new("ip").args(["netns", "del", n]).status();
-        }
-    }
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip").args(args).output().map_err(|e| format!("ip {args:?}: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!("ip {args:?}: {}", String::from_utf8_lossy(&out.stderr)))
-    }
-}
+#[path = "support/netns.rs"]
+mod netns;
+use netns::{ip, veth_pair, Namespaces};
 
 fn setup(tag: &str) -> Result<Namespaces, String> {
     let (dev, host) = (format!("starc-dev-{tag}"), format!("starc-host-{tag}"));
-    ip(&["netns", "add", &dev])?;
-    let mut ns = Namespaces { names: vec![dev.clone()], children: Vec::new() };
-    ip(&["netns", "add", &host])?;
-    ns.names.push(host.clone());
     let (va, vb) = (format!("sva{tag}"), format!("svb{tag}"));
-    ip(&["link", "add", &va, "netns", &dev, "type", "veth", "peer", "name", &vb, "netns", &host])?;
-    for (n, v, addr) in [(&dev, &va, "192.168.1.110/24"), (&host, &vb, "192.168.1.50/24")] {
-        ip(&["-n", n, "link", "set", "lo", "up"])?;
-        ip(&["-n", n, "addr", "add", addr, "dev", v])?;
-        ip(&["-n", n, "link", "set", v, "up"])?;
-    }
+    let ns = veth_pair(&dev, &host, &va, &vb, "192.168.1.110/24", "192.168.1.50/24")?;
     // Limited broadcast leaves by the default route, as on a real LiDAR network.
     ip(&["-n", &dev, "route", "add", "default", "dev", &va])?;
     Ok(ns)

@@ -12,53 +12,22 @@
 //! Needs root and ptp4l; in CI (CI set) their absence fails the test, elsewhere it is skipped.
 
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// The two tests share the 2-core machine; run them one at a time so neither sees the other's load.
 static SERIAL: Mutex<()> = Mutex::new(());
 
-struct Namespaces {
-    names: Vec<String>,
-    children: Vec<Child>,
-}
-
-impl Drop for Namespaces {
-    fn drop(&mut self) {
-        for c in &mut self.children {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-        for n in &self.names {
-            let _ = Command::new("ip").args(["netns", "del", n]).status();
-        }
-    }
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip").args(args).output().map_err(|e| format!("ip {args:?}: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!("ip {args:?}: {}", String::from_utf8_lossy(&out.stderr)))
-    }
-}
+#[path = "support/netns.rs"]
+mod netns;
+use netns::{veth_pair, Namespaces};
 
 /// Master namespace with `va` (10.79.0.1), slave namespace with `vb` (10.79.0.2).
 fn setup(tag: &str) -> Result<(Namespaces, [String; 4]), String> {
     let (m, s) = (format!("starc-ptpm-{tag}"), format!("starc-ptps-{tag}"));
-    ip(&["netns", "add", &m])?;
-    let mut ns = Namespaces { names: vec![m.clone()], children: Vec::new() };
-    ip(&["netns", "add", &s])?;
-    ns.names.push(s.clone());
     let (va, vb) = (format!("pma{tag}"), format!("psb{tag}"));
-    ip(&["link", "add", &va, "netns", &m, "type", "veth", "peer", "name", &vb, "netns", &s])?;
-    for (n, v, addr) in [(&m, &va, "10.79.0.1/24"), (&s, &vb, "10.79.0.2/24")] {
-        ip(&["-n", n, "link", "set", "lo", "up"])?;
-        ip(&["-n", n, "addr", "add", addr, "dev", v])?;
-        ip(&["-n", n, "link", "set", v, "up"])?;
-    }
+    let ns = veth_pair(&m, &s, &va, &vb, "10.79.0.1/24", "10.79.0.2/24")?;
     Ok((ns, [m, va, s, vb]))
 }
 
