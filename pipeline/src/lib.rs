@@ -2,7 +2,9 @@
 //! mock devices.
 //!
 //! - [`cloud`]: point clouds and their files (PCD, PLY, KITTI .bin).
+//! - [`align`]: registration of one cloud against another (NDT, then point-to-plane ICP).
 
+pub mod align;
 pub mod cloud;
 pub mod error;
 

@@ -1,0 +1,222 @@
+//! Points, voxel keys, the voxel downsampler and the voxel-hash neighbour index.
+
+use crate::cloud::PointCloud;
+use nalgebra::{Isometry3, Matrix3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+pub type Vec3 = Vector3<f64>;
+pub type Key = (i32, i32, i32);
+
+/// Multiply-xor hasher for voxel keys: SipHash costs more than the rest of a lookup.
+#[derive(Default)]
+pub struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.write_u64(u64::from(*b));
+        }
+    }
+    fn write_i32(&mut self, i: i32) {
+        self.write_u64(i as u32 as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(23) ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+pub type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
+
+/// Voxel of a point; coordinates beyond ±2^31 cells saturate (harmless: such points match nothing).
+pub fn key_of(p: &Vec3, inv_cell_m: f64) -> Key {
+    ((p.x * inv_cell_m).floor() as i32, (p.y * inv_cell_m).floor() as i32, (p.z * inv_cell_m).floor() as i32)
+}
+
+/// The finite, non-zero points of a cloud in f64.
+pub fn cloud_points(cloud: &PointCloud) -> Vec<Vec3> {
+    cloud
+        .points
+        .iter()
+        .filter(|p| !p.is_zero() && p.x_m.is_finite() && p.y_m.is_finite() && p.z_m.is_finite())
+        .map(|p| Vec3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)))
+        .collect()
+}
+
+/// One point per occupied voxel (the centroid), in a deterministic order (sorted by voxel).
+pub fn voxel_downsample(points: &[Vec3], voxel_m: f64) -> Vec<Vec3> {
+    if !(voxel_m > 0.0) {
+        return points.to_vec();
+    }
+    let inv = 1.0 / voxel_m;
+    let mut sums: KeyMap<(Vec3, u32)> = KeyMap::default();
+    for p in points {
+        let e = sums.entry(key_of(p, inv)).or_insert((Vec3::zeros(), 0));
+        e.0 += p;
+        e.1 += 1;
+    }
+    let mut cells: Vec<(Key, Vec3)> = sums.into_iter().map(|(k, (s, n))| (k, s / f64::from(n))).collect();
+    cells.sort_unstable_by_key(|c| c.0);
+    cells.into_iter().map(|c| c.1).collect()
+}
+
+/// Points bucketed by voxel for radius-bounded neighbour queries (the 27 cells around a query).
+/// Queries find every neighbour within `cell_m` of the query, and some farther ones.
+pub struct VoxelIndex {
+    inv_cell_m: f64,
+    /// Indices into `points`, grouped by voxel; `cells` maps a voxel to its range here.
+    order: Vec<u32>,
+    cells: KeyMap<(u32, u32)>,
+    pub points: Vec<Vec3>,
+}
+
+impl VoxelIndex {
+    pub fn new(points: Vec<Vec3>, cell_m: f64) -> Self {
+        let inv_cell_m = 1.0 / cell_m.max(1e-6);
+        let mut keyed: Vec<(Key, u32)> =
+            points.iter().enumerate().map(|(i, p)| (key_of(p, inv_cell_m), i as u32)).collect();
+        keyed.sort_unstable();
+        let mut cells = KeyMap::default();
+        let mut start = 0usize;
+        while start < keyed.len() {
+            let key = keyed[start].0;
+            let mut end = start;
+            while end < keyed.len() && keyed[end].0 == key {
+                end += 1;
+            }
+            cells.insert(key, (start as u32, end as u32));
+            start = end;
+        }
+        Self { inv_cell_m, order: keyed.into_iter().map(|k| k.1).collect(), cells, points }
+    }
+
+    fn for_each_near(&self, q: &Vec3, mut f: impl FnMut(u32, f64)) {
+        let (x, y, z) = key_of(q, self.inv_cell_m);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let key = (x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz));
+                    let Some(&(a, b)) = self.cells.get(&key) else { continue };
+                    for &i in self.order.get(a as usize..b as usize).unwrap_or(&[]) {
+                        if let Some(p) = self.points.get(i as usize) {
+                            f(i, (p - q).norm_squared());
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Nearest point within `max_m` (which should not exceed the cell size): (index, squared distance).
+    pub fn nearest(&self, q: &Vec3, max_m: f64) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        let max2 = max_m * max_m;
+        self.for_each_near(q, |i, d2| {
+            if d2 <= max2 && best.is_none_or(|b| d2 < b.1) {
+                best = Some((i as usize, d2));
+            }
+        });
+        best
+    }
+
+    /// Up to `k` nearest points within one cell size, into `out` as (squared distance, index).
+    pub fn k_nearest(&self, q: &Vec3, k: usize, out: &mut Vec<(f64, u32)>) {
+        out.clear();
+        let max2 = 1.0 / (self.inv_cell_m * self.inv_cell_m);
+        self.for_each_near(q, |i, d2| {
+            if d2 <= max2 {
+                out.push((d2, i));
+            }
+        });
+        if out.len() > k {
+            out.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+            out.truncate(k);
+        }
+    }
+}
+
+/// PCA normals from the `k` nearest neighbours within `radius_m`; `None` where fewer than 5
+/// neighbours are found or the neighbourhood is not plane-like (smallest eigenvalue above a third
+/// of the middle one: a corner or scattered points, where a plane has no meaning).
+pub fn estimate_normals(points: &[Vec3], radius_m: f64, k: usize) -> Vec<Option<Vec3>> {
+    let index = VoxelIndex::new(points.to_vec(), radius_m);
+    let mut nn = Vec::with_capacity(64);
+    points
+        .iter()
+        .map(|p| {
+            index.k_nearest(p, k, &mut nn);
+            if nn.len() < 5 {
+                return None;
+            }
+            let mut mean = Vec3::zeros();
+            for &(_, i) in &nn {
+                mean += index.points.get(i as usize)?;
+            }
+            mean /= nn.len() as f64;
+            let mut cov = Matrix3::zeros();
+            for &(_, i) in &nn {
+                let d = index.points.get(i as usize)? - mean;
+                cov += d * d.transpose();
+            }
+            let eig = SymmetricEigen::new(cov);
+            let mut idx = [0usize, 1, 2];
+            idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+            let (l0, l1) = (eig.eigenvalues[idx[0]], eig.eigenvalues[idx[1]]);
+            if l1 <= 0.0 || l0 > l1 / 3.0 {
+                return None;
+            }
+            let n: Vec3 = eig.eigenvectors.column(idx[0]).into_owned();
+            Some(n.normalize())
+        })
+        .collect()
+}
+
+/// SE(3) exponential of a twist (rotation vector first, then translation), as used for the
+/// left-multiplied updates `T <- exp(xi) T` of both solvers. The translation part is applied
+/// directly (first-order), which is exact enough for the small steps a solver takes.
+pub fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
+    let rot = UnitQuaternion::from_scaled_axis(Vec3::new(xi[0], xi[1], xi[2]));
+    Isometry3::from_parts(Translation3::new(xi[3], xi[4], xi[5]), rot)
+}
+
+/// A pose from x, y, z and yaw (degrees, about +z).
+pub fn pose_xyz_yaw(x_m: f64, y_m: f64, z_m: f64, yaw_deg: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(x_m, y_m, z_m),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_deg.to_radians()),
+    )
+}
+
+/// A pose from a row-major 4x4 matrix; `None` when the rotation block is not a rotation.
+pub fn pose_from_rows(m: &[[f64; 4]; 4]) -> Option<Isometry3<f64>> {
+    let r = Matrix3::new(m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2]);
+    if !r.iter().all(|v| v.is_finite())
+        || ((r.transpose() * r) - Matrix3::identity()).norm() > 1e-3
+        || r.determinant() < 0.0
+    {
+        return None;
+    }
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
+    Some(Isometry3::from_parts(Translation3::new(m[0][3], m[1][3], m[2][3]), rot))
+}
+
+/// Row-major 4x4 matrix of a pose.
+pub fn pose_rows(t: &Isometry3<f64>) -> [[f64; 4]; 4] {
+    let m = t.to_homogeneous();
+    let mut rows = [[0.0; 4]; 4];
+    for (r, row) in rows.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = m[(r, c)];
+        }
+    }
+    rows
+}
+
+/// Translation (m) and rotation (deg) between two poses.
+pub fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+    let d = a.inverse() * b;
+    (d.translation.vector.norm(), d.rotation.angle().to_degrees())
+}

@@ -1,0 +1,137 @@
+//! Fine stage: trimmed point-to-plane ICP with a Huber loss, Gauss-Newton on SE(3)
+//! (left-multiplied updates), and the quality metrics of the result.
+
+use super::geometry::{exp_se3, Vec3, VoxelIndex};
+use nalgebra::{Isometry3, Matrix6, Point3, SymmetricEigen, Vector6};
+
+/// The target prepared for ICP: reduced points with normals, indexed by voxel.
+pub struct IcpTarget {
+    pub index: VoxelIndex,
+    pub normals: Vec<Option<Vec3>>,
+}
+
+pub struct IcpParams {
+    pub max_correspondence_m: f64,
+    pub trim_ratio: f64,
+    pub huber_m: f64,
+    pub max_iterations: u32,
+    pub converged_update: f64,
+    pub inlier_distance_m: f64,
+}
+
+pub struct IcpResult {
+    pub pose: Isometry3<f64>,
+    pub iterations: u32,
+    pub rms_residual_m: f64,
+    pub inlier_ratio: f64,
+    pub update_norm: f64,
+    pub degeneracy_index: f64,
+    pub correspondences: usize,
+}
+
+/// One correspondence: moved source point, target normal, signed point-to-plane residual.
+struct Pair {
+    q: Vec3,
+    n: Vec3,
+    r: f64,
+}
+
+fn correspondences(
+    target: &IcpTarget,
+    source: &[Vec3],
+    pose: &Isometry3<f64>,
+    p: &IcpParams,
+    pairs: &mut Vec<Pair>,
+) -> usize {
+    pairs.clear();
+    let mut inliers = 0;
+    for s in source {
+        let q = (pose * Point3::from(*s)).coords;
+        let Some((i, d2)) = target.index.nearest(&q, p.max_correspondence_m) else { continue };
+        if d2 <= p.inlier_distance_m * p.inlier_distance_m {
+            inliers += 1;
+        }
+        let (Some(Some(n)), Some(t)) = (target.normals.get(i), target.index.points.get(i)) else { continue };
+        pairs.push(Pair { q, n: *n, r: n.dot(&(q - t)) });
+    }
+    // Trimming: keep the best share by |residual| (partial overlap leaves the rest unmatched).
+    let keep = ((pairs.len() as f64) * p.trim_ratio.clamp(0.0, 1.0)).ceil() as usize;
+    if keep < pairs.len() {
+        pairs.select_nth_unstable_by(keep, |a, b| a.r.abs().total_cmp(&b.r.abs()));
+        pairs.truncate(keep);
+    }
+    inliers
+}
+
+/// Point-to-plane Jacobian row: d(nᵀ q)/dxi for q <- exp(xi) q.
+fn jacobian(q: &Vec3, n: &Vec3) -> Vector6<f64> {
+    let a = q.cross(n);
+    Vector6::new(a.x, a.y, a.z, n.x, n.y, n.z)
+}
+
+pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &IcpParams) -> IcpResult {
+    let mut pose = pose;
+    let mut pairs = Vec::with_capacity(source.len());
+    let mut iterations = 0;
+    let mut update_norm = f64::INFINITY;
+    for _ in 0..p.max_iterations {
+        iterations += 1;
+        correspondences(target, source, &pose, p, &mut pairs);
+        if pairs.len() < 6 {
+            break;
+        }
+        let mut h = Matrix6::zeros();
+        let mut g = Vector6::zeros();
+        for pair in &pairs {
+            let j = jacobian(&pair.q, &pair.n);
+            let w = if pair.r.abs() <= p.huber_m { 1.0 } else { p.huber_m / pair.r.abs() };
+            h += w * j * j.transpose();
+            g += w * pair.r * j;
+        }
+        let damping = 1e-9 * h.trace().max(1e-12);
+        let Some(chol) = (h + Matrix6::identity() * damping).cholesky() else { break };
+        let step = -chol.solve(&g);
+        update_norm = step.norm();
+        pose = exp_se3(&step) * pose;
+        if update_norm < p.converged_update {
+            break;
+        }
+    }
+    let inliers = correspondences(target, source, &pose, p, &mut pairs);
+    let rms_residual_m = if pairs.is_empty() {
+        f64::INFINITY
+    } else {
+        (pairs.iter().map(|x| x.r * x.r).sum::<f64>() / pairs.len() as f64).sqrt()
+    };
+    IcpResult {
+        pose,
+        iterations,
+        rms_residual_m,
+        inlier_ratio: if source.is_empty() { 0.0 } else { inliers as f64 / source.len() as f64 },
+        update_norm,
+        degeneracy_index: degeneracy_index(&pairs),
+        correspondences: pairs.len(),
+    }
+}
+
+/// Smallest eigenvalue of the point-to-plane information matrix `Σ JᵀJ / N`, made unit-free:
+/// rotations are taken about the centroid of the matched points and scaled by their RMS distance
+/// from it, so every column of J is at most 1 in size and the index lies in [0, 1/3]. Near 0, some
+/// direction (a corridor's axis, a rotation about a lone wall's normal) is not constrained by the
+/// geometry; a box-like room gives about 0.05-0.2.
+fn degeneracy_index(pairs: &[Pair]) -> f64 {
+    if pairs.len() < 6 {
+        return 0.0;
+    }
+    let n = pairs.len() as f64;
+    let centroid = pairs.iter().map(|p| p.q).sum::<Vec3>() / n;
+    let radius = (pairs.iter().map(|p| (p.q - centroid).norm_squared()).sum::<f64>() / n).sqrt().max(1e-6);
+    let mut h = Matrix6::zeros();
+    for p in pairs {
+        let a = (p.q - centroid).cross(&p.n) / radius;
+        let j = Vector6::new(a.x, a.y, a.z, p.n.x, p.n.y, p.n.z);
+        h += j * j.transpose();
+    }
+    h /= n;
+    SymmetricEigen::new(h).eigenvalues.min().max(0.0)
+}

@@ -1,0 +1,29 @@
+//! Registration of one point cloud (the source, e.g. a responder's scan) against another (the
+//! target, e.g. the robot's map): multi-resolution NDT for the coarse pose, then trimmed
+//! point-to-plane ICP with a Huber loss, acceptance on RMS residual, inlier ratio, update norm and
+//! degeneracy index, and a yaw-grid reseed when the first attempt is rejected.
+//!
+//! ```no_run
+//! # use starc_pipeline::align::{Aligner, AlignConfig, cloud_points};
+//! # fn f(src: &starc_pipeline::cloud::PointCloud, tgt: &starc_pipeline::cloud::PointCloud) -> Result<(), starc_pipeline::PipelineError> {
+//! let aligner = Aligner::new(&cloud_points(tgt), AlignConfig::default())?;
+//! let report = aligner.align(&cloud_points(src), &nalgebra::Isometry3::identity());
+//! println!("accepted {} transform {:?}", report.accepted, report.transform);
+//! # Ok(()) }
+//! ```
+
+mod config;
+mod geometry;
+mod icp;
+mod ndt;
+mod register;
+
+pub use config::AlignConfig;
+pub use geometry::{
+    cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample, Vec3,
+    VoxelIndex,
+};
+pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,162 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use super::*;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use std::path::PathBuf;
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/registration")
+}
+
+/// The real pair and its ground truth, or `None` (test skipped, said so) where shared/data is absent.
+fn real_pair() -> Option<(Vec<Vec3>, Vec<Vec3>, Isometry3<f64>)> {
+    let dir = data_dir();
+    if !dir.join("source.ply").exists() {
+        eprintln!("skipped: {} is absent", dir.display());
+        return None;
+    }
+    let source = cloud_points(&crate::cloud::read(&dir.join("source.ply")).unwrap());
+    let target = cloud_points(&crate::cloud::read(&dir.join("target.ply")).unwrap());
+    let text = std::fs::read_to_string(dir.join("T_target_source.txt")).unwrap();
+    let v: Vec<f64> = text.split_whitespace().map(|t| t.parse().unwrap()).collect();
+    assert_eq!(v.len(), 16);
+    let mut rows = [[0.0; 4]; 4];
+    for (i, x) in v.iter().enumerate() {
+        rows[i / 4][i % 4] = *x;
+    }
+    Some((source, target, pose_from_rows(&rows).unwrap()))
+}
+
+fn assert_close(report: &AlignReport, truth: &Isometry3<f64>, what: &str) {
+    let (t_m, r_deg) = pose_error(&report.pose, truth);
+    eprintln!(
+        "{what}: accepted {} after {} attempts, error {:.2} cm {:.3} deg, {:.0} ms",
+        report.accepted,
+        report.attempts.len(),
+        t_m * 100.0,
+        r_deg,
+        report.total_ms
+    );
+    assert!(report.accepted, "{what}: rejected: {:?}", report.best().map(|a| &a.rejected_because));
+    assert!(t_m < 0.05 && r_deg < 0.5, "{what}: error {t_m} m {r_deg} deg");
+}
+
+#[test]
+fn real_pair_from_identity_and_perturbed_starts() {
+    let Some((source, target, truth)) = real_pair() else { return };
+    let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
+    let report = aligner.align(&source, &Isometry3::identity());
+    assert_close(&report, &truth, "identity");
+    assert_eq!(report.attempts.len(), 1, "identity start should pass without reseeding");
+    let m = &report.attempts[0].metrics;
+    assert!(m.degeneracy_index > 0.0 && m.degeneracy_index <= 1.0 / 3.0 + 1e-9);
+    perturbed_starts(&aligner, &source, &truth, &[(30.0, 1.0, 0.0)]);
+}
+
+#[test]
+fn real_pair_from_far_starts_with_reseeding() {
+    let Some((source, target, truth)) = real_pair() else { return };
+    let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
+    perturbed_starts(&aligner, &source, &truth, &[(90.0, 0.0, 1.5), (180.0, 2.0, 0.0)]);
+}
+
+/// Starts off the truth by a yaw about the true position (reseeding does the large ones) and a shift.
+fn perturbed_starts(aligner: &Aligner, source: &[Vec3], truth: &Isometry3<f64>, starts: &[(f64, f64, f64)]) {
+    for &(yaw_deg, dx_m, dy_m) in starts {
+        let perturb = Isometry3::from_parts(
+            Translation3::new(dx_m, dy_m, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, f64::to_radians(yaw_deg)),
+        );
+        let start = Isometry3::from_parts(truth.translation * perturb.translation, perturb.rotation * truth.rotation);
+        let report = aligner.align(source, &start);
+        assert_close(&report, truth, &format!("yaw {yaw_deg} deg, shift ({dx_m}, {dy_m}) m"));
+    }
+}
+
+#[test]
+fn synthetic_known_transform() {
+    // Four walls, a floor, a ceiling and two boxes: constrained in all six directions.
+    let mut target = Vec::new();
+    let step = 0.1;
+    for i in 0..=100 {
+        for j in 0..=30 {
+            let (a, b) = (-5.0 + f64::from(i) * step, f64::from(j) * step);
+            target.push(Vec3::new(a, -4.0, b));
+            target.push(Vec3::new(a, 4.0, b));
+            target.push(Vec3::new(-5.0, a * 0.8, b));
+            target.push(Vec3::new(5.0, a * 0.8, b));
+        }
+        for j in 0..=80 {
+            let (a, b) = (-5.0 + f64::from(i) * step, -4.0 + f64::from(j) * step);
+            target.push(Vec3::new(a, b, 0.0));
+            target.push(Vec3::new(a, b, 3.0));
+        }
+    }
+    for i in 0..=10 {
+        for j in 0..=10 {
+            let (a, b) = (f64::from(i) * step, f64::from(j) * step);
+            target.push(Vec3::new(1.0 + a, 1.0 + b, 1.0));
+            target.push(Vec3::new(1.0, 1.0 + a, b));
+            target.push(Vec3::new(1.0 + a, 1.0, b));
+            target.push(Vec3::new(-3.0 + a, -2.0, b * 1.5));
+            target.push(Vec3::new(-3.0, -2.0 + a, b * 1.5));
+        }
+    }
+    let truth =
+        Isometry3::from_parts(Translation3::new(0.4, -0.3, 0.1), UnitQuaternion::from_euler_angles(0.02, -0.01, 0.2));
+    let inv = truth.inverse();
+    let source: Vec<Vec3> = target.iter().map(|p| (inv * Point3::from(*p)).coords).collect();
+    let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
+    let report = aligner.align(&source, &Isometry3::identity());
+    assert_close(&report, &truth, "synthetic");
+    assert!(report.best().unwrap().metrics.rms_residual_m < 0.01);
+}
+
+#[test]
+fn nonsense_pair_is_rejected() {
+    let Some((_, target, _)) = real_pair() else { return };
+    // A scattered cloud (deterministic pseudo-random) around the scan: nothing in it matches.
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let source: Vec<Vec3> =
+        (0..20_000).map(|_| Vec3::new(next() * 40.0 - 20.0, next() * 40.0 - 20.0, next() * 6.0 - 2.0)).collect();
+    let config = AlignConfig { reseed_yaw_step_deg: 120.0, ..AlignConfig::default() };
+    let aligner = Aligner::new(&target, config).unwrap();
+    let report = aligner.align(&source, &Isometry3::identity());
+    let best = report.best().unwrap();
+    eprintln!("nonsense: {:?}", best.rejected_because);
+    assert!(!report.accepted);
+    assert_eq!(report.attempts.len(), 3, "every reseed tried");
+    assert!(report.attempts.iter().all(|a| !a.accepted && !a.rejected_because.is_empty()));
+}
+
+#[test]
+fn config_defaults_and_example_load() {
+    let empty = AlignConfig::from_toml("").unwrap();
+    assert_eq!(empty, AlignConfig::default());
+    let example =
+        std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/align.toml")).unwrap();
+    assert_eq!(AlignConfig::from_toml(&example).unwrap(), AlignConfig::default());
+    assert!(AlignConfig::from_toml("max_rms_m = 0.1\nbogus = 1\n").is_err());
+    assert!(AlignConfig::from_toml("icp_trim_ratio = 1.5\n").is_err());
+    assert!(AlignConfig::from_toml("ndt_resolutions_m = []\n").is_err());
+}
+
+#[test]
+fn reseed_offsets_cover_the_circle() {
+    assert_eq!(yaw_offsets_deg(90.0), vec![90.0, -90.0, 180.0]);
+    assert_eq!(yaw_offsets_deg(60.0).len(), 5);
+    assert_eq!(yaw_offsets_deg(360.0), Vec::<f64>::new());
+}
+
+#[test]
+fn bad_input_does_not_panic() {
+    let target = vec![Vec3::new(f64::NAN, 0.0, 0.0), Vec3::new(1e300, -1e300, 0.0)];
+    assert!(Aligner::new(&target, AlignConfig::default()).is_err());
+    assert!(Aligner::new(&[], AlignConfig::default()).is_err());
+}
