@@ -101,9 +101,11 @@ impl AlignConfig {
         if self.ndt_resolutions_m.is_empty() || self.ndt_resolutions_m.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
             return bad("ndt_resolutions_m must list positive sizes");
         }
-        if !(self.icp_trim_ratio > 0.0 && self.icp_trim_ratio <= 1.0)
-            || !(self.ndt_outlier_ratio > 0.0 && self.ndt_outlier_ratio < 1.0)
-        {
+        let ratios_ok = self.icp_trim_ratio > 0.0
+            && self.icp_trim_ratio <= 1.0
+            && self.ndt_outlier_ratio > 0.0
+            && self.ndt_outlier_ratio < 1.0;
+        if !ratios_ok {
             return bad("icp_trim_ratio must be in (0, 1] and ndt_outlier_ratio in (0, 1)");
         }
         if !(self.reseed_yaw_step_deg >= 0.0 && self.reseed_yaw_step_deg <= 360.0) {

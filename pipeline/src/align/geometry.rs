@@ -48,7 +48,7 @@ pub fn cloud_points(cloud: &PointCloud) -> Vec<Vec3> {
 
 /// One point per occupied voxel (the centroid), in a deterministic order (sorted by voxel).
 pub fn voxel_downsample(points: &[Vec3], voxel_m: f64) -> Vec<Vec3> {
-    if !(voxel_m > 0.0) {
+    if voxel_m.is_nan() || voxel_m <= 0.0 {
         return points.to_vec();
     }
     let inv = 1.0 / voxel_m;

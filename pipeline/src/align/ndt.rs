@@ -51,7 +51,7 @@ impl NdtGrid {
             // largest keeps the inverse bounded (Magnusson's regularisation).
             let eig = SymmetricEigen::new(cov);
             let max = eig.eigenvalues.max();
-            if !(max > 0.0) {
+            if max.is_nan() || max <= 0.0 {
                 continue;
             }
             let floor = (max * 0.01).max(1e-6);

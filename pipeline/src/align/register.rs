@@ -203,21 +203,25 @@ impl Aligner {
     fn rejections(&self, m: &AlignMetrics) -> Vec<String> {
         let c = &self.config;
         let mut why = Vec::new();
-        // Written so that NaN fails every test.
-        if !(m.rms_residual_m <= c.max_rms_m) {
+        if !at_most(m.rms_residual_m, c.max_rms_m) {
             why.push(format!("rms residual {:.4} m > {} m", m.rms_residual_m, c.max_rms_m));
         }
-        if !(m.inlier_ratio >= c.min_inlier_ratio) {
+        if !at_most(c.min_inlier_ratio, m.inlier_ratio) {
             why.push(format!("inlier ratio {:.3} < {}", m.inlier_ratio, c.min_inlier_ratio));
         }
-        if !(m.update_norm <= c.max_update_norm) {
+        if !at_most(m.update_norm, c.max_update_norm) {
             why.push(format!("update norm {:.2e} > {:.0e}", m.update_norm, c.max_update_norm));
         }
-        if !(m.degeneracy_index >= c.min_degeneracy_index) {
+        if !at_most(c.min_degeneracy_index, m.degeneracy_index) {
             why.push(format!("degeneracy index {:.2e} < {:.0e}", m.degeneracy_index, c.min_degeneracy_index));
         }
         why
     }
+}
+
+/// `a <= b`, false when either is NaN (so a NaN metric fails its acceptance test).
+fn at_most(a: f64, b: f64) -> bool {
+    a <= b
 }
 
 /// Yaw offsets of the reseeding grid (degrees, in (-180, 180], 0 left out), nearest first.
