@@ -45,6 +45,8 @@ enum Command {
     /// The omni-wheel base over CAN: status, keyboard teleop.
     #[command(subcommand)]
     Base(cmd::base::Command),
+    /// Register a source cloud against a target cloud (NDT, then point-to-plane ICP).
+    Align(cmd::align::Args),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +68,7 @@ fn main() -> ExitCode {
         Command::Sim(a) => cmd::sim::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),
         Command::Base(c) => cmd::base::run(c),
+        Command::Align(a) => cmd::align::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,6 @@
 //! One module per subcommand; each has `Args` (or `Command`) and `run`.
 
+pub mod align;
 pub mod base;
 pub mod demo;
 pub mod devices;
