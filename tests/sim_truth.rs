@@ -62,6 +62,8 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
         "people.csv",
         "robot_imu_external.csv",
         "robot_wheels.csv",
+        "robot_imu_external.mip",
+        "robot_can.log",
         "camera/frames.csv",
         "extrinsics.json",
     ] {
@@ -116,7 +118,7 @@ fn pcap_is_avia_traffic_and_points_match_the_truth() {
         let l = labels.get(&(is_robot, t0)).expect("every point packet has its labels");
         assert_eq!(l.len(), 96);
         // Every other packet: check each return against the scene, cast from the true pose.
-        if e.0 % 2 != 0 {
+        if !e.0.is_multiple_of(2) {
             continue;
         }
         let tum = if is_robot { &robot_tum } else { &fpv_tum };

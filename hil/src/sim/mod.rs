@@ -9,6 +9,7 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod devices;
 pub mod human;
 pub mod imu;
 pub mod lan;

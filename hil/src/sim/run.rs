@@ -8,6 +8,7 @@
 use crate::error::{HilError, Result};
 use crate::rng::hash2;
 use crate::sim::camera::{write_png, PinholeCamera};
+use crate::sim::devices::{ExternalImu, WheelCan};
 use crate::sim::imu::ImuSim;
 use crate::sim::lan::{AviaLink, LinkStats, Wire};
 use crate::sim::lidar::{avia_lidar_imu, AviaSim, LabelSink, LABEL_EMPTY};
@@ -227,16 +228,16 @@ pub fn run(
     people_csv.line("time_s,label,name,pose,centre_x_m,centre_y_m,centre_z_m,length_m,width_m,height_m,yaw_rad")?;
     let ext = &scenario.imu;
     let lidar_ext_imu = mount_pose(&ext.external_mount);
-    let mut ext_imu =
+    let ext_imu_sim =
         ImuSim::new(robot_motion.clone(), lidar_ext_imu, ext.external, ext.external_rate_hz, 0.0, hash2(seed, 77));
-    let mut ext_csv = OutFile::create(&out.join("robot_imu_external.csv"))?;
-    ext_csv.line("time_s,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2")?;
-    let ext_period_ns = (1e9 / ext.external_rate_hz).round().max(1.0) as u64;
+    let robot_start_ns = secs_ns(scenario.robot.get_ref().start_s);
+    let mut ext_imu = ExternalImu::create(out, ext_imu_sim, ext.external_rate_hz, robot_start_ns, ptp_offset)?;
     let mut wheels = WheelOdometry::new(scenario.robot.get_ref().wheels, hash2(seed, 78));
     let mut wheel_csv = OutFile::create(&out.join("robot_wheels.csv"))?;
     let n_wheels = crate::sim::wheels::Kinematics::new(scenario.robot.get_ref().wheels).wheels();
     let wheel_cols: Vec<String> = (0..n_wheels).map(|i| format!("wheel{i}_rad_s")).collect();
     wheel_csv.line(&format!("time_s,{},vx_m_s,vy_m_s,wz_rad_s", wheel_cols.join(",")))?;
+    let mut wheel_can = WheelCan::create(out, scenario.robot.get_ref().motors, n_wheels)?;
     let mut wheel_tum = OutFile::create(&out.join("robot_wheel_odom.tum"))?;
     let camera = PinholeCamera::new(scenario.camera.clone());
     let cam_dir = out.join("camera");
@@ -251,12 +252,10 @@ pub fn run(
     }
     let cam_period_ns = (1e9 / scenario.camera.rate_hz).round().max(1.0) as u64;
     let rig_start_ns = secs_ns(scenario.responder.get_ref().start_s);
-    let robot_start_ns = secs_ns(scenario.robot.get_ref().start_s);
 
     let end_ns = secs_ns(duration_s);
     let wall_start = Instant::now();
     let mut camera_frames = 0u64;
-    let mut next_ext_ns = robot_start_ns;
     let mut next_cam_ns = rig_start_ns;
     let mut t = 0u64;
     while t <= end_ns {
@@ -298,6 +297,7 @@ pub fn run(
         }
         if t >= robot_start_ns && t % (1_000_000_000 / WHEEL_HZ) == 0 {
             let r = wheels.sample(&robot_motion, ts);
+            wheel_can.write(ptp(t), &r.wheel_rad_s)?;
             let rates: Vec<String> = r.wheel_rad_s.iter().map(|w| format!("{w:.5}")).collect();
             wheel_csv.line(&format!(
                 "{:.6},{},{:.5},{:.5},{:.5}",
@@ -315,20 +315,7 @@ pub fn run(
             );
             wheel_tum.line(&tum_line(ptp(t), &odom))?;
         }
-        while next_ext_ns <= t {
-            let m = ext_imu.sample(next_ext_ns as f64 * 1e-9);
-            ext_csv.line(&format!(
-                "{:.6},{:.7},{:.7},{:.7},{:.6},{:.6},{:.6}",
-                ptp(next_ext_ns) as f64 * 1e-9,
-                m.gyro_rad_s.x,
-                m.gyro_rad_s.y,
-                m.gyro_rad_s.z,
-                m.accel_m_s2.x,
-                m.accel_m_s2.y,
-                m.accel_m_s2.z
-            ))?;
-            next_ext_ns += ext_period_ns;
-        }
+        ext_imu.step(t)?;
         if let Some(frames) = frames_csv.as_mut() {
             if t >= next_cam_ns {
                 let lidar = rig_motion.lidar_pose(ts);
@@ -371,9 +358,11 @@ pub fn run(
         d.labels_out.finish()?;
         d.tum.finish()?;
     }
-    for f in [people_csv, ext_csv, wheel_csv, wheel_tum] {
+    for f in [people_csv, wheel_csv, wheel_tum] {
         f.finish()?;
     }
+    ext_imu.finish()?;
+    wheel_can.finish()?;
     if let Some(f) = frames_csv {
         f.finish()?;
     }

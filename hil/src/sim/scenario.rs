@@ -280,6 +280,9 @@ pub struct Robot {
     /// Wheel layout for the wheel odometry.
     #[serde(default)]
     pub wheels: WheelLayout,
+    /// What the motor controllers speak in robot_can.log.
+    #[serde(default)]
+    pub motors: MotorProtocol,
 }
 
 fn default_static_s() -> f64 {
@@ -309,6 +312,15 @@ pub enum WheelLayout {
     Omni3,
     Omni4,
     Mecanum,
+}
+
+/// Motor controllers of the base: DJI C620 feedback (0x201..) or CiA 402 TPDO1 (0x181..).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MotorProtocol {
+    #[default]
+    C620,
+    Cia402,
 }
 
 /// The responder with the helmet or handheld rig.
