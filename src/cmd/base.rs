@@ -61,7 +61,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     }
 }
 
-async fn start(config: &PathBuf) -> anyhow::Result<(BaseHandle, tokio::sync::mpsc::Receiver<BaseEvent>)> {
+async fn start(config: &std::path::Path) -> anyhow::Result<(BaseHandle, tokio::sync::mpsc::Receiver<BaseEvent>)> {
     let config = BaseConfig::load(config).with_context(|| format!("loading {}", config.display()))?;
     let (bus, options) = open_bus(&config.can).await.context("opening the CAN transport")?;
     Ok(spawn(bus, Base::new(config)?, options))
@@ -255,7 +255,7 @@ async fn drive(args: DriveArgs) -> anyhow::Result<()> {
                     write!(out, "\r\nevent: {}\r\n", serde_json::to_string(&e)?)?;
                 }
                 shown += 1;
-                if shown % 4 == 0 {
+                if shown.is_multiple_of(4) {
                     let s = base.status();
                     let measured: Vec<String> = s.wheels.iter()
                         .map(|w| w.measured_rad_s.map(|r| format!("{r:6.2}")).unwrap_or_else(|| "     -".into()))

@@ -181,7 +181,8 @@ pub fn run(
 
     let mut devices = Vec::new();
     let mut counters = Vec::new();
-    let specs: [(&'static str, Arc<dyn Motion>, f64, Ipv4Addr, Ipv4Addr, &[u8; 15]); 2] = [
+    type DeviceSpec = (&'static str, Arc<dyn Motion>, f64, Ipv4Addr, Ipv4Addr, &'static [u8; 15]);
+    let specs: [DeviceSpec; 2] = [
         ("robot", robot_motion.clone(), scenario.robot.get_ref().start_s, ROBOT_AVIA_IP, ROBOT_HOST_IP, ROBOT_CODE),
         ("fpv", rig_motion.clone(), scenario.responder.get_ref().start_s, FPV_AVIA_IP, FPV_HOST_IP, FPV_CODE),
     ];
@@ -264,7 +265,7 @@ pub fn run(
         for d in &mut devices {
             d.link.step(t, &mut tap)?;
         }
-        if t % (1_000_000_000 / TRUTH_HZ) == 0 {
+        if t.is_multiple_of(1_000_000_000 / TRUTH_HZ) {
             for d in &mut devices {
                 if t >= d.power_on_ns {
                     d.tum.line(&tum_line(ptp(t), &d.motion.lidar_pose(t as f64 * 1e-9)))?;
@@ -272,7 +273,7 @@ pub fn run(
             }
         }
         let ts = t as f64 * 1e-9;
-        if t % (1_000_000_000 / PEOPLE_HZ) == 0 {
+        if t.is_multiple_of(1_000_000_000 / PEOPLE_HZ) {
             for p in &world.people {
                 let b = p.body_at(ts);
                 people_csv.line(&format!(
@@ -295,7 +296,7 @@ pub fn run(
             }
             progress(ts, duration_s);
         }
-        if t >= robot_start_ns && t % (1_000_000_000 / WHEEL_HZ) == 0 {
+        if t >= robot_start_ns && t.is_multiple_of(1_000_000_000 / WHEEL_HZ) {
             let r = wheels.sample(&robot_motion, ts);
             wheel_can.write(ptp(t), &r.wheel_rad_s)?;
             let rates: Vec<String> = r.wheel_rad_s.iter().map(|w| format!("{w:.5}")).collect();
@@ -329,7 +330,7 @@ pub fn run(
                 next_cam_ns += cam_period_ns;
             }
         }
-        if opts.realtime && t % 10_000_000 == 0 {
+        if opts.realtime && t.is_multiple_of(10_000_000) {
             let due = Duration::from_nanos(t);
             if let Some(wait) = due.checked_sub(wall_start.elapsed()) {
                 std::thread::sleep(wait);
