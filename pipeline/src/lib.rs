@@ -3,9 +3,11 @@
 //!
 //! - [`cloud`]: point clouds and their files (PCD, PLY, KITTI .bin).
 //! - [`align`]: registration of one cloud against another (NDT, then point-to-plane ICP).
+//! - [`lio`]: LiDAR-inertial odometry (IMU propagation, de-skew, iterated Kalman update, iVox map).
 
 pub mod align;
 pub mod cloud;
 pub mod error;
+pub mod lio;
 
 pub use error::PipelineError;
