@@ -3,7 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use nalgebra::{Isometry3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Rotation3, Vector3};
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
 use starc_livox::capture;
@@ -15,28 +15,9 @@ use std::path::Path;
 
 const ROBOT_AVIA: Ipv4Addr = Ipv4Addr::new(192, 168, 1, 101);
 
-fn read_tum(path: &Path) -> Vec<(u64, Isometry3<f64>)> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| {
-            let f: Vec<&str> = l.split_whitespace().collect();
-            let (s, ns) = f[0].split_once('.').unwrap();
-            let t = s.parse::<u64>().unwrap() * 1_000_000_000 + ns.parse::<u64>().unwrap();
-            let v: Vec<f64> = f[1..].iter().map(|x| x.parse().unwrap()).collect();
-            let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
-            (t, Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), q))
-        })
-        .collect()
-}
-
-/// The truth at `t`, interpolated between its 200 Hz samples.
-fn truth_at(tum: &[(u64, Isometry3<f64>)], t: u64) -> Isometry3<f64> {
-    let i = tum.partition_point(|(s, _)| *s <= t).clamp(1, tum.len() - 1);
-    let ((ta, a), (tb, b)) = (tum[i - 1], tum[i]);
-    let f = ((t as f64 - ta as f64) / (tb as f64 - ta as f64)).clamp(0.0, 1.0);
-    a.lerp_slerp(&b, f)
-}
+#[path = "support/tum.rs"]
+mod tum;
+use tum::{read_tum, truth_at};
 
 /// The robot's IMU samples and scans, decoded from the capture.
 fn decode(pcap: &Path) -> (Vec<ImuSample>, Vec<LioScan>) {

@@ -3,7 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 use starc_hil::sim::lidar::LABEL_EMPTY;
 use starc_hil::sim::run::{run, SimOptions, SimSummary};
 use starc_hil::sim::scenario::Scenario;
@@ -14,36 +14,14 @@ use std::collections::HashMap;
 use std::net::Ipv4Addr;
 use std::path::Path;
 
+#[path = "support/tum.rs"]
+mod tum;
+use tum::{read_tum, truth_at};
+
 fn simulate(name: &str, secs: f64, seed: u64, dir: &Path, camera: bool) -> SimSummary {
     let (scenario, text) = Scenario::load(name).unwrap();
     let opts = SimOptions { out: dir.to_path_buf(), duration_s: Some(secs), seed, realtime: false, camera };
     run(&scenario, &text, &opts, &mut |_, _| {}).unwrap()
-}
-
-fn read_tum(path: &Path) -> Vec<(u64, Isometry3<f64>)> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| {
-            let f: Vec<&str> = l.split_whitespace().collect();
-            let (s, ns) = f[0].split_once('.').unwrap();
-            let t = s.parse::<u64>().unwrap() * 1_000_000_000 + ns.parse::<u64>().unwrap();
-            let v: Vec<f64> = f[1..].iter().map(|x| x.parse().unwrap()).collect();
-            let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
-            (t, Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), q))
-        })
-        .collect()
-}
-
-/// The truth pose nearest `t` (the TUM files are at 200 Hz).
-fn pose_at(tum: &[(u64, Isometry3<f64>)], t: u64) -> Isometry3<f64> {
-    let i = tum.partition_point(|(s, _)| *s < t).min(tum.len() - 1);
-    let j = i.saturating_sub(1);
-    if t.abs_diff(tum[j].0) < t.abs_diff(tum[i].0) {
-        tum[j].1
-    } else {
-        tum[i].1
-    }
 }
 
 #[test]
@@ -127,7 +105,7 @@ fn pcap_is_avia_traffic_and_points_match_the_truth() {
         assert_eq!(non_empty.len(), labelled.len(), "labels and returns line up");
         let bodies = world.bodies_at((t0 - 1_767_225_600_000_000_000) as f64 * 1e-9);
         for p in non_empty {
-            let pose = pose_at(tum, t0 + u64::from(p.offset_ns));
+            let pose = truth_at(tum, t0 + u64::from(p.offset_ns));
             let local = Vector3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
             let range = local.norm();
             let dir_w = pose.rotation * (local / range);
@@ -178,7 +156,7 @@ fn imu_measures_the_true_motion() {
         let t = packet.header.timestamp.ns;
         // The truth's rate: finite difference of the 200 Hz poses around t (yaw about the
         // LiDAR's z, which the IMU's axes share).
-        let (a, b) = (pose_at(&tum, t - 5_000_000), pose_at(&tum, t + 5_000_000));
+        let (a, b) = (truth_at(&tum, t - 5_000_000), truth_at(&tum, t + 5_000_000));
         let w = (a.rotation.inverse() * b.rotation).scaled_axis() / 0.01;
         gyro_err.push(f64::from(imu.gyro_rad_s[2]) - w.z);
         if t < 1_767_225_600_000_000_000 + 1_900_000_000 {
@@ -262,7 +240,7 @@ yaw_deg = 0
             person_points[usize::from(label)] += 1;
             let t = t0 + u64::from(p.offset_ns);
             let w =
-                pose_at(&tum, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
+                truth_at(&tum, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
             // The box of this person at the nearest 100 ms.
             let b = boxes.iter().filter(|(_, lb, _)| *lb == label).min_by_key(|(bt, _, _)| bt.abs_diff(t)).unwrap().2;
             let (s, c) = b[6].sin_cos();

@@ -44,17 +44,21 @@ impl Bvh {
 
     /// The nearest box hit by the unit ray before `t_max`.
     pub fn cast(&self, o: &V3, d: &V3, t_max: f64) -> Option<Hit> {
+        self.cast_inv(o, d, &d.map(|v| 1.0 / v), t_max)
+    }
+
+    /// As [`Bvh::cast`], with the ray's reciprocal direction (`inv` = 1/d) already at hand.
+    pub fn cast_inv(&self, o: &V3, d: &V3, inv: &V3, t_max: f64) -> Option<Hit> {
         if self.nodes.is_empty() {
             return None;
         }
-        let inv = d.map(|v| 1.0 / v);
         let mut best: Option<Hit> = None;
         let mut limit = t_max;
         // (node, its entry distance): a node is skipped when a nearer hit was found meanwhile.
         let mut stack = [(0u32, 0.0f64); 64];
         let mut top = 0usize;
         if let Some(root) = self.nodes.first() {
-            if let Some(t) = root.bounds.enter(o, &inv, limit) {
+            if let Some(t) = root.bounds.enter(o, inv, limit) {
                 stack[0] = (0, t);
                 top = 1;
             }
@@ -69,13 +73,13 @@ impl Bvh {
             if node.count > 0 {
                 let (a, b) = (node.first as usize, (node.first + node.count) as usize);
                 for bx in self.boxes.get(a..b).unwrap_or(&[]) {
-                    if let Some((t, normal)) = bx.intersect_inv(o, d, &inv, limit) {
+                    if let Some((t, normal)) = bx.intersect_inv(o, d, inv, limit) {
                         limit = t;
                         best = Some(Hit { t, normal, albedo: bx.albedo, label: 0 });
                     }
                 }
             } else if top + 2 <= stack.len() {
-                let enter = |i: u32| self.nodes.get(i as usize).and_then(|n| n.bounds.enter(o, &inv, limit));
+                let enter = |i: u32| self.nodes.get(i as usize).and_then(|n| n.bounds.enter(o, inv, limit));
                 let (l, r) = (node.first, node.right);
                 match (enter(l), enter(r)) {
                     (Some(tl), Some(tr)) => {

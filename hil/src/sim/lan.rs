@@ -86,6 +86,14 @@ impl AviaLink {
         self.device_ip
     }
 
+    pub fn host_ip(&self) -> Ipv4Addr {
+        self.host.ip
+    }
+
+    pub fn broadcast_code(&self) -> BroadcastCode {
+        self.code
+    }
+
     /// PTP time = simulator time + this.
     pub fn ptp_offset_ns() -> i64 {
         DEFAULT_EPOCH_NS
@@ -131,10 +139,7 @@ impl AviaLink {
                         (Some(session), _) => session.handle(now_ns, &frame),
                         (None, _) => Vec::new(),
                     };
-                    self.pending.extend(outputs.into_iter().filter_map(|o| match o {
-                        SessionOutput::Send(b) => Some(b),
-                        SessionOutput::Event(_) => None,
-                    }));
+                    self.pending.extend(sends(outputs));
                 }
                 Action::SendPoints { to, bytes } => {
                     self.stats.point_packets += 1;
@@ -153,11 +158,16 @@ impl AviaLink {
             }
         }
         if let Some(session) = self.session.as_mut() {
-            self.pending.extend(session.poll(now_ns).into_iter().filter_map(|o| match o {
-                SessionOutput::Send(b) => Some(b),
-                SessionOutput::Event(_) => None,
-            }));
+            self.pending.extend(sends(session.poll(now_ns)));
         }
         Ok(())
     }
+}
+
+/// The datagrams among a host session's outputs (its events are not needed here).
+fn sends(outputs: Vec<SessionOutput>) -> impl Iterator<Item = Vec<u8>> {
+    outputs.into_iter().filter_map(|o| match o {
+        SessionOutput::Send(b) => Some(b),
+        SessionOutput::Event(_) => None,
+    })
 }

@@ -42,6 +42,8 @@ pub struct AviaSim {
     labels: Option<LabelSink>,
     /// Sub-beam offsets (azimuth, elevation) in degrees sampled across the beam's footprint.
     sub_beams: Vec<(f64, f64)>,
+    /// Scratch for the echoes of one firing (kept to spare an allocation per firing).
+    hits: Vec<(Hit, V3, V3)>,
     casts: Arc<AtomicU64>,
 }
 
@@ -52,7 +54,17 @@ impl AviaSim {
     pub fn new(world: Arc<World>, motion: Arc<dyn Motion>, model: AviaModel, imu: ImuSim, seed: u64) -> Self {
         let [h, v] = model.divergence_deg;
         let sub_beams = vec![(-h / 2.0, 0.0), (h / 2.0, 0.0), (0.0, v / 2.0)];
-        Self { world, motion, model, imu, seed, labels: None, sub_beams, casts: Arc::new(AtomicU64::new(0)) }
+        Self {
+            world,
+            motion,
+            model,
+            imu,
+            seed,
+            labels: None,
+            sub_beams,
+            hits: Vec::new(),
+            casts: Arc::new(AtomicU64::new(0)),
+        }
     }
 
     /// Collects the labels of every packet filled into `sink`.
@@ -88,6 +100,24 @@ impl AviaSim {
     }
 }
 
+/// Which of `n` distinct echoes (nearest first) is return `i` of `echoes`: first and last (dual),
+/// first, middle and last (triple); none where there are too few.
+fn echo_index(echoes: usize, n: usize, i: usize) -> Option<usize> {
+    match (echoes, i) {
+        _ if n == 0 => None,
+        (_, 0) => Some(0),
+        (3, 1) => (n > 2).then_some(1),
+        _ => (n > 1 && i + 1 == echoes).then_some(n - 1),
+    }
+}
+
+/// Appends a return and its label, or an empty return.
+fn emit(out: &mut Vec<Return>, labels: &mut Vec<u16>, echo: Option<(Return, u16)>) {
+    let (r, label) = echo.unwrap_or((Return::EMPTY, LABEL_EMPTY));
+    out.push(r);
+    labels.push(label);
+}
+
 /// Direction of a beam turned by small azimuth and elevation offsets (deg).
 fn offset_direction(t_ns: u64, line: usize, d_az: f64, d_el: f64) -> V3 {
     let (az, el) = AviaPattern::angles_deg(t_ns, line);
@@ -119,20 +149,14 @@ impl PointSource for AviaSim {
             let centre = self.world.cast(&origin, &d_world, max_cast, &bodies);
             self.casts.fetch_add(1, Ordering::Relaxed);
             if echoes == 1 {
-                match centre.and_then(|h| self.echo(&d_sensor, &h, &mut rng, &d_world)) {
-                    Some((r, label)) => {
-                        out.push(r);
-                        labels.push(label);
-                    }
-                    None => {
-                        out.push(Return::EMPTY);
-                        labels.push(LABEL_EMPTY);
-                    }
-                }
+                emit(out, &mut labels, centre.and_then(|h| self.echo(&d_sensor, &h, &mut rng, &d_world)));
                 continue;
             }
-            // Several echoes: what the rest of the beam's footprint sees, nearest first.
-            let mut hits: Vec<(Hit, V3, V3)> = centre.map(|h| (h, d_sensor, d_world)).into_iter().collect();
+            // Several echoes: what the rest of the beam's footprint sees, nearest first, echoes
+            // closer than the separation merged into the nearer one.
+            let mut hits = std::mem::take(&mut self.hits);
+            hits.clear();
+            hits.extend(centre.map(|h| (h, d_sensor, d_world)));
             for &(da, de) in &self.sub_beams {
                 let ds = offset_direction(t_ns, line, da, de);
                 let dw = rot * ds;
@@ -142,36 +166,19 @@ impl PointSource for AviaSim {
                 }
             }
             hits.sort_by(|a, b| a.0.t.total_cmp(&b.0.t));
-            let mut distinct: Vec<(Hit, V3, V3)> = Vec::with_capacity(echoes);
-            for h in hits {
-                if distinct.last().is_none_or(|l| h.0.t - l.0.t >= self.model.min_echo_separation_m) {
-                    distinct.push(h);
-                }
-            }
-            // First, then last (dual); first, middle, last (triple).
-            let picks: Vec<Option<&(Hit, V3, V3)>> = match (echoes, distinct.len()) {
-                (_, 0) => vec![None; echoes],
-                (2, n) => vec![distinct.first(), if n > 1 { distinct.last() } else { None }],
-                (_, n) => {
-                    let mut v = vec![distinct.first(), if n > 2 { distinct.get(1) } else { None }];
-                    v.push(if n > 1 { distinct.last() } else { None });
-                    v.truncate(echoes);
-                    v
-                }
-            };
-            for (i, pick) in picks.into_iter().enumerate() {
-                match pick.and_then(|(h, ds, dw)| self.echo(ds, h, &mut rng, dw)) {
-                    Some((mut r, label)) => {
+            let separation = self.model.min_echo_separation_m;
+            hits.dedup_by(|later, kept| later.0.t - kept.0.t < separation);
+            for i in 0..echoes {
+                let echo = echo_index(echoes, hits.len(), i)
+                    .and_then(|k| hits.get(k))
+                    .and_then(|(h, ds, dw)| self.echo(ds, h, &mut rng, dw))
+                    .map(|(mut r, label)| {
                         r.tag = ((i as u8 + 1) & 0x3) << 4;
-                        out.push(r);
-                        labels.push(label);
-                    }
-                    None => {
-                        out.push(Return::EMPTY);
-                        labels.push(LABEL_EMPTY);
-                    }
-                }
+                        (r, label)
+                    });
+                emit(out, &mut labels, echo);
             }
+            self.hits = hits;
         }
         if let Some(sink) = &self.labels {
             // A poisoned lock only means a writer panicked; the labels are still whole.
@@ -194,4 +201,20 @@ impl PointSource for AviaSim {
 /// (0.04165, 0.02326, -0.0284) m in the IMU frame, axes aligned).
 pub fn avia_lidar_imu() -> Isometry3<f64> {
     Isometry3::translation(-0.04165, -0.02326, 0.0284)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn echoes_are_first_last_or_first_middle_last() {
+        let picks = |echoes, n| (0..echoes).map(|i| echo_index(echoes, n, i)).collect::<Vec<_>>();
+        assert_eq!(picks(2, 0), [None, None]);
+        assert_eq!(picks(2, 1), [Some(0), None]);
+        assert_eq!(picks(2, 4), [Some(0), Some(3)]);
+        assert_eq!(picks(3, 1), [Some(0), None, None]);
+        assert_eq!(picks(3, 2), [Some(0), None, Some(1)]);
+        assert_eq!(picks(3, 4), [Some(0), Some(1), Some(3)]);
+    }
 }

@@ -233,9 +233,9 @@ pub fn run(
         ImuSim::new(robot_motion.clone(), lidar_ext_imu, ext.external, ext.external_rate_hz, 0.0, hash2(seed, 77));
     let robot_start_ns = secs_ns(scenario.robot.get_ref().start_s);
     let mut ext_imu = ExternalImu::create(out, ext_imu_sim, ext.external_rate_hz, robot_start_ns, ptp_offset)?;
-    let mut wheels = WheelOdometry::new(scenario.robot.get_ref().wheels, hash2(seed, 78));
+    let mut wheels = WheelOdometry::new(scenario.robot.get_ref().wheels, hash2(seed, 78))?;
     let mut wheel_csv = OutFile::create(&out.join("robot_wheels.csv"))?;
-    let n_wheels = crate::sim::wheels::Kinematics::new(scenario.robot.get_ref().wheels).wheels();
+    let n_wheels = wheels.wheels();
     let wheel_cols: Vec<String> = (0..n_wheels).map(|i| format!("wheel{i}_rad_s")).collect();
     wheel_csv.line(&format!("time_s,{},vx_m_s,vy_m_s,wz_rad_s", wheel_cols.join(",")))?;
     let mut wheel_can = WheelCan::create(out, scenario.robot.get_ref().motors, n_wheels)?;
@@ -349,8 +349,8 @@ pub fn run(
         summaries.push(DeviceSummary {
             name: d.name.into(),
             avia_ip: d.link.device_ip(),
-            host_ip: if d.name == "robot" { ROBOT_HOST_IP } else { FPV_HOST_IP },
-            broadcast_code: String::from_utf8_lossy(if d.name == "robot" { ROBOT_CODE } else { FPV_CODE }).into(),
+            host_ip: d.link.host_ip(),
+            broadcast_code: d.link.broadcast_code().to_string(),
             power_on_s: d.power_on_ns as f64 * 1e-9,
             link: d.link.stats(),
             returns: d.returns,

@@ -1,75 +1,32 @@
 //! Wheel odometry of the simulated base: wheel rates from the base's true body velocity through
-//! the wheel layout's inverse kinematics, with slip; the odometry integrates the body velocity
-//! recovered from the measured rates by the least-squares forward kinematics, as a real base
-//! driver does (the same models as drivers/base, kept here to leave hil free of the base crate).
+//! the base driver's own kinematics (`starc_base::kinematics`), with slip; the odometry
+//! integrates the body velocity the forward kinematics recovers from the measured rates, as the
+//! real base driver does.
 
+use crate::error::{HilError, Result};
 use crate::rng::SplitMix64;
 use crate::sim::motion::RobotMotion;
 use crate::sim::scenario::WheelLayout;
-use nalgebra::{DMatrix, DVector};
+use starc_base::kinematics::{Kinematics, KinematicsConfig, Twist};
 
-/// Default geometry: wheel radius and centre-to-wheel distance (m) of a small omni base;
-/// mecanum: half wheelbase lx and half track ly.
-const OMNI_RADIUS_M: f64 = 0.05;
-const OMNI_ARM_M: f64 = 0.2;
-const MECANUM_RADIUS_M: f64 = 0.076;
-const MECANUM_LX_M: f64 = 0.2;
-const MECANUM_LY_M: f64 = 0.2;
+/// Default geometry of each layout: a small omni base (0.05 m wheels on a 0.2 m arm) and a
+/// mecanum base (0.076 m wheels, lx = ly = 0.2 m).
+pub fn default_geometry(layout: WheelLayout) -> KinematicsConfig {
+    match layout {
+        WheelLayout::Omni3 => {
+            KinematicsConfig::Omni3 { wheel_radius_m: 0.05, center_to_wheel_m: 0.2, wheel_angles_deg: None }
+        }
+        WheelLayout::Omni4 => {
+            KinematicsConfig::Omni4 { wheel_radius_m: 0.05, center_to_wheel_m: 0.2, wheel_angles_deg: None }
+        }
+        WheelLayout::Mecanum => {
+            KinematicsConfig::Mecanum { wheel_radius_m: 0.076, half_length_m: 0.2, half_width_m: 0.2 }
+        }
+    }
+}
+
 /// Slip: multiplicative (1 sigma) per wheel reading.
 const SLIP_SIGMA: f64 = 0.02;
-
-/// A wheel layout's kinematics: wheel rates (rad/s) = `inverse` * (vx, vy, wz).
-#[derive(Clone, Debug)]
-pub struct Kinematics {
-    inverse: DMatrix<f64>,
-    forward: DMatrix<f64>,
-}
-
-impl Kinematics {
-    pub fn new(layout: WheelLayout) -> Self {
-        let rows: Vec<[f64; 3]> = match layout {
-            WheelLayout::Omni3 | WheelLayout::Omni4 => {
-                let n = if layout == WheelLayout::Omni3 { 3 } else { 4 };
-                let first = if n == 3 { 90f64 } else { 45.0 };
-                (0..n)
-                    .map(|i| {
-                        let th = (first + 360.0 * i as f64 / n as f64).to_radians();
-                        [-th.sin() / OMNI_RADIUS_M, th.cos() / OMNI_RADIUS_M, OMNI_ARM_M / OMNI_RADIUS_M]
-                    })
-                    .collect()
-            }
-            WheelLayout::Mecanum => {
-                let (r, k) = (MECANUM_RADIUS_M, MECANUM_LX_M + MECANUM_LY_M);
-                vec![
-                    [1.0 / r, -1.0 / r, -k / r],
-                    [1.0 / r, 1.0 / r, k / r],
-                    [1.0 / r, 1.0 / r, -k / r],
-                    [1.0 / r, -1.0 / r, k / r],
-                ]
-            }
-        };
-        let inverse = DMatrix::from_fn(rows.len(), 3, |i, j| rows.get(i).map_or(0.0, |r| r[j]));
-        // Least squares: (A^T A)^-1 A^T; A has full column rank for every layout here.
-        let forward = (inverse.transpose() * &inverse)
-            .try_inverse()
-            .map(|m| m * inverse.transpose())
-            .unwrap_or_else(|| DMatrix::zeros(3, rows.len()));
-        Self { inverse, forward }
-    }
-
-    pub fn wheels(&self) -> usize {
-        self.inverse.nrows()
-    }
-
-    pub fn wheel_rates(&self, body: [f64; 3]) -> Vec<f64> {
-        (&self.inverse * DVector::from_row_slice(&body)).iter().copied().collect()
-    }
-
-    pub fn body_velocity(&self, rates: &[f64]) -> [f64; 3] {
-        let v = &self.forward * DVector::from_row_slice(rates);
-        [v[0], v[1], v[2]]
-    }
-}
 
 /// Integrates the base's wheel odometry.
 pub struct WheelOdometry {
@@ -90,8 +47,14 @@ pub struct WheelReading {
 }
 
 impl WheelOdometry {
-    pub fn new(layout: WheelLayout, seed: u64) -> Self {
-        Self { kinematics: Kinematics::new(layout), rng: SplitMix64::new(seed), pose: [0.0; 3], last_t: None }
+    pub fn new(layout: WheelLayout, seed: u64) -> Result<Self> {
+        let kinematics =
+            Kinematics::new(&default_geometry(layout)).map_err(|e| HilError::config("robot.wheels", e.to_string()))?;
+        Ok(Self { kinematics, rng: SplitMix64::new(seed), pose: [0.0; 3], last_t: None })
+    }
+
+    pub fn wheels(&self) -> usize {
+        self.kinematics.wheel_count()
     }
 
     /// The reading at `t` (s); calls in time order.
@@ -103,9 +66,13 @@ impl WheelOdometry {
         let wz = (b.yaw_rad - a.yaw_rad) / (2.0 * h);
         let (s, c) = now.yaw_rad.sin_cos();
         let body = [c * vxw + s * vyw, -s * vxw + c * vyw, wz];
-        let rates: Vec<f64> =
-            self.kinematics.wheel_rates(body).into_iter().map(|w| w * (1.0 + SLIP_SIGMA * self.rng.normal())).collect();
-        let measured = self.kinematics.body_velocity(&rates);
+        let rates: Vec<f64> = self
+            .kinematics
+            .wheel_rates(Twist::new(body[0], body[1], body[2]))
+            .into_iter()
+            .map(|w| w * (1.0 + SLIP_SIGMA * self.rng.normal()))
+            .collect();
+        let measured = self.kinematics.body_twist(&rates).map_or([0.0; 3], |t| [t.vx_m_s, t.vy_m_s, t.wz_rad_s]);
         let dt = self.last_t.map_or(0.0, |l| t - l);
         self.last_t = Some(t);
         // Midpoint integration of the planar motion.
@@ -123,19 +90,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn forward_inverts_inverse_for_every_layout() {
+    fn every_layout_builds_and_the_front_omni_wheel_turns_backwards() {
         for layout in [WheelLayout::Omni3, WheelLayout::Omni4, WheelLayout::Mecanum] {
-            let k = Kinematics::new(layout);
-            let body = [0.3, -0.2, 0.5];
-            let back = k.body_velocity(&k.wheel_rates(body));
-            for i in 0..3 {
-                assert!((back[i] - body[i]).abs() < 1e-9, "{layout:?}: {back:?}");
-            }
+            assert!(WheelOdometry::new(layout, 1).is_ok(), "{layout:?}");
         }
-        // Pure forward motion on the 3-wheel base: the front wheel (at 90 deg) spins backwards
-        // relative to the others... v_i = -sin(th) vx: wheel 0 (th 90) gets -vx / r.
-        let k = Kinematics::new(WheelLayout::Omni3);
-        let rates = k.wheel_rates([0.5, 0.0, 0.0]);
-        assert!((rates[0] + 0.5 / OMNI_RADIUS_M).abs() < 1e-9, "{rates:?}");
+        // v_i = -sin(th_i) vx: wheel 0 of the 3-wheel base (th 90 deg) gets -vx / r.
+        let k = Kinematics::new(&default_geometry(WheelLayout::Omni3)).map_err(|e| e.to_string());
+        let rates = k.map(|k| k.wheel_rates(Twist::new(0.5, 0.0, 0.0)));
+        assert!(matches!(rates.as_deref(), Ok([w0, _, _]) if (w0 + 0.5 / 0.05).abs() < 1e-9), "{rates:?}");
     }
 }

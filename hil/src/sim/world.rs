@@ -158,9 +158,9 @@ impl World {
     /// The nearest surface along a unit ray, building and `bodies` alike.
     #[inline]
     pub fn cast(&self, o: &V3, d: &V3, t_max: f64, bodies: &[Body]) -> Option<Hit> {
-        let mut best = self.building.cast(o, d, t_max);
-        let mut limit = best.map_or(t_max, |h| h.t);
         let inv = d.map(|v| 1.0 / v);
+        let mut best = self.building.cast_inv(o, d, &inv, t_max);
+        let mut limit = best.map_or(t_max, |h| h.t);
         for b in bodies {
             if let Some(h) = b.cast(o, d, &inv, limit) {
                 limit = h.t;
