@@ -41,34 +41,59 @@ pub struct AlignConfig {
     pub max_update_norm: f64,
     /// Acceptance: degeneracy index (see [`crate::align::AlignMetrics::degeneracy_index`]), at least.
     pub min_degeneracy_index: f64,
-    /// Yaw-grid reseeding: spacing of the yaw seeds around the circle (degrees); 0 disables it.
-    /// The default, 60, leaves every heading within 30 deg of a seed; on the real pair a single
-    /// attempt converged from every yaw error up to 40 deg (with or without a 1 m shift).
+    /// Yaw-grid seed search: spacing of the yaw seeds around the circle (degrees); 0 disables the
+    /// search (one attempt from the initial guess). The seeds are the guess turned about its own
+    /// position by multiples of this step (the guess itself included).
     pub reseed_yaw_step_deg: f64,
+    /// Translation seeds: besides the guess's position, positions this far from it along +-x and
+    /// +-y of the target frame (0: none). Each yaw seed is tried at each position.
+    pub reseed_shift_m: f64,
+    /// Seed scoring: the source reduced to this voxel size, then thinned to at most
+    /// `seed_max_points` (evenly through the voxel order), is refined on the first `seed_levels`
+    /// NDT levels with at most `seed_max_iterations` each, and the seeds are ranked by the NDT
+    /// score on the last of those levels.
+    pub seed_source_voxel_m: f64,
+    pub seed_max_points: usize,
+    pub seed_levels: usize,
+    pub seed_max_iterations: u32,
+    /// The seed at the guess itself goes first when its score is within this share of the best
+    /// one: in a near-symmetric place (a box room, a corridor) a flipped seed can score a little
+    /// better, and the guess is the better bet.
+    pub seed_prior_margin: f64,
+    /// Full attempts (the remaining NDT levels, then ICP) on the best-ranked seeds, at most; the
+    /// search stops at the first accepted one.
+    pub max_full_attempts: usize,
 }
 
 impl Default for AlignConfig {
     fn default() -> Self {
         Self {
-            ndt_resolutions_m: vec![8.0, 4.0, 2.0, 1.0, 0.5],
-            ndt_source_voxel_m: 0.5,
+            ndt_resolutions_m: vec![8.0, 4.0, 2.0, 1.0],
+            ndt_source_voxel_m: 1.0,
             ndt_target_voxel_m: 0.1,
             ndt_max_iterations: 20,
             ndt_outlier_ratio: 0.55,
             icp_voxel_m: 0.25,
             normal_radius_m: 1.0,
             normal_neighbours: 12,
-            icp_max_correspondence_m: 1.0,
+            icp_max_correspondence_m: 0.5,
             icp_trim_ratio: 0.8,
             icp_huber_m: 0.1,
             icp_max_iterations: 30,
-            icp_converged_update: 1e-5,
+            icp_converged_update: 1e-4,
             inlier_distance_m: 0.3,
             max_rms_m: 0.1,
             min_inlier_ratio: 0.5,
             max_update_norm: 1e-3,
             min_degeneracy_index: 1e-3,
-            reseed_yaw_step_deg: 60.0,
+            reseed_yaw_step_deg: 30.0,
+            reseed_shift_m: 0.0,
+            seed_source_voxel_m: 1.5,
+            seed_max_points: 600,
+            seed_levels: 2,
+            seed_max_iterations: 6,
+            seed_prior_margin: 0.1,
+            max_full_attempts: 3,
         }
     }
 }
@@ -94,6 +119,7 @@ impl AlignConfig {
             self.icp_max_correspondence_m,
             self.icp_huber_m,
             self.inlier_distance_m,
+            self.seed_source_voxel_m,
         ];
         if positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return bad("voxel sizes, radii and distances must be positive");
@@ -110,6 +136,18 @@ impl AlignConfig {
         }
         if !(self.reseed_yaw_step_deg >= 0.0 && self.reseed_yaw_step_deg <= 360.0) {
             return bad("reseed_yaw_step_deg must be in [0, 360]");
+        }
+        if !(self.reseed_shift_m.is_finite() && self.reseed_shift_m >= 0.0) {
+            return bad("reseed_shift_m must be finite and not negative");
+        }
+        if !(0.0..1.0).contains(&self.seed_prior_margin) {
+            return bad("seed_prior_margin must be in [0, 1)");
+        }
+        if self.seed_levels == 0 || self.seed_levels > self.ndt_resolutions_m.len() {
+            return bad("seed_levels must be between 1 and the number of NDT levels");
+        }
+        if self.seed_max_points == 0 || self.max_full_attempts == 0 {
+            return bad("seed_max_points and max_full_attempts must be at least 1");
         }
         Ok(())
     }

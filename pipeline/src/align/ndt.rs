@@ -72,6 +72,11 @@ impl NdtGrid {
         self.cells.len()
     }
 
+    /// Score (lower is better) of `source` moved by `t`, and how many of its points matched a cell.
+    pub fn score(&self, source: &[Vec3], t: &Isometry3<f64>) -> (f64, usize) {
+        self.evaluate(source, t, None)
+    }
+
     /// Score (lower is better), and when `normal` is given, the Gauss-Newton system (H, g).
     fn evaluate(
         &self,

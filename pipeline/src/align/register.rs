@@ -29,17 +29,37 @@ pub struct AlignMetrics {
     pub correspondences: usize,
 }
 
+/// One seed of the search after its coarse refinement (the first `seed_levels` NDT levels on the
+/// thinned source).
+#[derive(Clone, Debug, Serialize)]
+pub struct Seed {
+    /// Yaw added to the initial guess (degrees).
+    pub yaw_offset_deg: f64,
+    /// Offset of the seed's position from the guess's, in the target frame (m).
+    pub shift_m: [f64; 2],
+    /// NDT score on the last seed level, per seed point (lower is better; 0 matches nothing).
+    pub score: f64,
+    /// Seed points near a Gaussian of that level, over all seed points.
+    pub matched_ratio: f64,
+    /// The coarse pose a full attempt starts from.
+    #[serde(skip)]
+    pub pose: Isometry3<f64>,
+}
+
 /// One NDT+ICP run from one seed.
 #[derive(Clone, Debug, Serialize)]
 pub struct Attempt {
     /// Yaw added to the initial guess for this seed (0 for the initial guess itself).
     pub seed_yaw_offset_deg: f64,
+    /// Offset of the seed's position from the guess's (m, target frame).
+    pub seed_shift_m: [f64; 2],
     /// The result: a 4x4 row-major transform mapping source points into the target frame.
     pub transform: [[f64; 4]; 4],
     #[serde(skip)]
     pub pose: Isometry3<f64>,
     pub metrics: AlignMetrics,
-    /// Gauss-Newton iterations of each NDT level, coarse to fine.
+    /// Gauss-Newton iterations of each NDT level this attempt ran, coarse to fine (the seed
+    /// levels are not repeated when the attempt starts from a ranked seed).
     pub ndt_iterations: Vec<u32>,
     pub icp_iterations: u32,
     pub ndt_ms: f64,
@@ -54,7 +74,7 @@ pub struct Attempt {
 pub struct AlignReport {
     /// Whether the chosen attempt passed every acceptance test.
     pub accepted: bool,
-    /// The chosen attempt (best accepted one; when none was accepted, the one with the highest
+    /// The chosen attempt (the accepted one; when none was accepted, the one with the highest
     /// inlier ratio, for diagnosis only).
     pub best_attempt: usize,
     pub transform: [[f64; 4]; 4],
@@ -62,8 +82,14 @@ pub struct AlignReport {
     pub pose: Isometry3<f64>,
     pub source_points: usize,
     pub source_reduce_ms: f64,
+    /// Every seed of the search, best score first (empty when the search is off).
+    pub seeds: Vec<Seed>,
+    /// Time spent refining and ranking the seeds.
+    pub seed_ms: f64,
     pub total_ms: f64,
     pub attempts: Vec<Attempt>,
+    /// Why nothing was accepted (None when accepted).
+    pub failure: Option<String>,
 }
 
 impl AlignReport {
@@ -109,21 +135,47 @@ impl Aligner {
     }
 
     /// Aligns `source` to the target from `initial` (a guess of the transform mapping source into
-    /// target); when that attempt is rejected and reseeding is on, tries yaw seeds around the
-    /// circle (rotating the guess about its own position) and keeps the best accepted one.
+    /// target). With the seed search on (`reseed_yaw_step_deg > 0`), every yaw seed (at every
+    /// seed position) is refined cheaply on the coarse NDT levels and ranked by its NDT score; full
+    /// attempts (the finer NDT levels, then ICP) run on the best-ranked distinct seeds until one is
+    /// accepted. With it off, one full attempt runs from `initial`.
     pub fn align(&self, source: &[Vec3], initial: &Isometry3<f64>) -> AlignReport {
+        let c = &self.config;
         let t0 = Instant::now();
-        let ndt_source = voxel_downsample(source, self.config.ndt_source_voxel_m);
-        let icp_source = voxel_downsample(source, self.config.icp_voxel_m);
+        // Finest reduction first; the coarser ones are taken from it (cheaper than from the raw scan).
+        let icp_source = voxel_downsample(source, c.icp_voxel_m);
+        let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
         let source_reduce_ms = ms_since(t0);
-        let mut attempts = vec![self.attempt(&ndt_source, &icp_source, initial, 0.0)];
-        let step = self.config.reseed_yaw_step_deg;
-        if !attempts.iter().any(|a| a.accepted) && step > 0.0 {
-            for offset in yaw_offsets_deg(step) {
-                let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, offset.to_radians());
-                let seed = Isometry3::from_parts(initial.translation, rot * initial.rotation);
-                attempts.push(self.attempt(&ndt_source, &icp_source, &seed, offset));
+        let mut attempts = Vec::new();
+        let mut seeds = Vec::new();
+        let mut seed_ms = 0.0;
+        if c.reseed_yaw_step_deg > 0.0 {
+            let t1 = Instant::now();
+            let seed_source = thin(voxel_downsample(&icp_source, c.seed_source_voxel_m), c.seed_max_points);
+            seeds = self.rank_seeds(&seed_source, initial);
+            seed_ms = ms_since(t1);
+            let mut tried: Vec<Isometry3<f64>> = Vec::new();
+            for s in &seeds {
+                if attempts.len() >= c.max_full_attempts {
+                    break;
+                }
+                // Seeds that fell into the same basin would repeat the same attempt.
+                if tried.iter().any(|t| {
+                    let (dt, da) = super::geometry::pose_error(t, &s.pose);
+                    dt < 0.5 && da < 5.0
+                }) {
+                    continue;
+                }
+                tried.push(s.pose);
+                let a = self.attempt(&ndt_source, &icp_source, &s.pose, c.seed_levels, s.yaw_offset_deg, s.shift_m);
+                let done = a.accepted;
+                attempts.push(a);
+                if done {
+                    break;
+                }
             }
+        } else {
+            attempts.push(self.attempt(&ndt_source, &icp_source, initial, 0, 0.0, [0.0; 2]));
         }
         let better = |a: &Attempt, b: &Attempt| {
             (a.accepted, a.metrics.inlier_ratio, -a.metrics.rms_residual_m)
@@ -138,6 +190,16 @@ impl Aligner {
             }
         }
         let (accepted, pose) = attempts.get(best).map_or((false, *initial), |a| (a.accepted, a.pose));
+        let failure = (!accepted).then(|| {
+            let why =
+                attempts.get(best).map_or_else(|| "no attempt ran".to_string(), |a| a.rejected_because.join("; "));
+            format!(
+                "none of {} attempt(s) from {} seed(s) passed; the best (seed yaw {:+.0} deg) failed: {why}",
+                attempts.len(),
+                seeds.len().max(1),
+                attempts.get(best).map_or(0.0, |a| a.seed_yaw_offset_deg)
+            )
+        });
         AlignReport {
             accepted,
             best_attempt: best,
@@ -145,9 +207,58 @@ impl Aligner {
             pose,
             source_points: icp_source.len(),
             source_reduce_ms,
+            seeds,
+            seed_ms,
             total_ms: ms_since(t0),
             attempts,
+            failure,
         }
+    }
+
+    /// The seeds (yaw grid at each seed position) refined on the coarse levels, best score first.
+    fn rank_seeds(&self, seed_source: &[Vec3], initial: &Isometry3<f64>) -> Vec<Seed> {
+        let c = &self.config;
+        let mut yaws = vec![0.0];
+        yaws.extend(yaw_offsets_deg(c.reseed_yaw_step_deg));
+        let d = c.reseed_shift_m;
+        let mut shifts = vec![[0.0, 0.0]];
+        if d > 0.0 {
+            shifts.extend([[d, 0.0], [-d, 0.0], [0.0, d], [0.0, -d]]);
+        }
+        let levels = c.seed_levels.min(self.grids.len());
+        let n = seed_source.len().max(1) as f64;
+        let mut seeds = Vec::with_capacity(yaws.len() * shifts.len());
+        for shift in &shifts {
+            for &yaw in &yaws {
+                let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw.to_radians());
+                let mut translation = initial.translation;
+                translation.vector.x += shift[0];
+                translation.vector.y += shift[1];
+                let mut pose = Isometry3::from_parts(translation, rot * initial.rotation);
+                for grid in self.grids.iter().take(levels) {
+                    pose = ndt::refine_level(grid, seed_source, pose, c.seed_max_iterations).pose;
+                }
+                let (score, matched) =
+                    self.grids.get(levels.saturating_sub(1)).map_or((0.0, 0), |g| g.score(seed_source, &pose));
+                seeds.push(Seed {
+                    yaw_offset_deg: yaw,
+                    shift_m: *shift,
+                    score: score / n,
+                    matched_ratio: matched as f64 / n,
+                    pose,
+                });
+            }
+        }
+        seeds.sort_by(|a, b| a.score.total_cmp(&b.score));
+        // Scores are negative (more negative is better): "within the margin" of the best.
+        let best = seeds.first().map_or(0.0, |s| s.score);
+        if let Some(i) = seeds.iter().position(|s| s.yaw_offset_deg == 0.0 && s.shift_m == [0.0, 0.0]) {
+            if i > 0 && seeds.get(i).is_some_and(|s| s.score <= best * (1.0 - c.seed_prior_margin)) {
+                let guess = seeds.remove(i);
+                seeds.insert(0, guess);
+            }
+        }
+        seeds
     }
 
     fn attempt(
@@ -155,13 +266,15 @@ impl Aligner {
         ndt_source: &[Vec3],
         icp_source: &[Vec3],
         seed: &Isometry3<f64>,
+        first_level: usize,
         seed_yaw_offset_deg: f64,
+        seed_shift_m: [f64; 2],
     ) -> Attempt {
         let c = &self.config;
         let t0 = Instant::now();
         let mut pose = *seed;
         let mut ndt_iterations = Vec::with_capacity(self.grids.len());
-        for grid in &self.grids {
+        for grid in self.grids.iter().skip(first_level) {
             let level = ndt::refine_level(grid, ndt_source, pose, c.ndt_max_iterations);
             pose = level.pose;
             ndt_iterations.push(level.iterations);
@@ -188,6 +301,7 @@ impl Aligner {
         let rejected_because = self.rejections(&metrics);
         Attempt {
             seed_yaw_offset_deg,
+            seed_shift_m,
             transform: pose_rows(&r.pose),
             pose: r.pose,
             metrics,
@@ -232,4 +346,13 @@ pub fn yaw_offsets_deg(step_deg: f64) -> Vec<f64> {
         (1..n).map(|k| f64::from(k) * step).map(|o| if o > 180.0 { o - 360.0 } else { o }).collect();
     offsets.sort_by(|a, b| a.abs().total_cmp(&b.abs()).then(b.total_cmp(a)));
     offsets
+}
+
+/// At most `max` points, taken evenly through `points` (the voxel order spreads them in space).
+fn thin(points: Vec<Vec3>, max: usize) -> Vec<Vec3> {
+    if points.len() <= max || max == 0 {
+        return points;
+    }
+    let step = points.len() as f64 / max as f64;
+    (0..max).filter_map(|i| points.get((i as f64 * step) as usize).copied()).collect()
 }

@@ -47,7 +47,9 @@ fn real_pair_from_identity_and_perturbed_starts() {
     let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
     let report = aligner.align(&source, &Isometry3::identity());
     assert_close(&report, &truth, "identity");
-    assert_eq!(report.attempts.len(), 1, "identity start should pass without reseeding");
+    assert_eq!(report.attempts.len(), 1, "identity start: the best-ranked seed should pass");
+    assert!(report.failure.is_none());
+    assert_eq!(report.seeds.len(), 12, "yaw seeds every 30 deg");
     let m = &report.attempts[0].metrics;
     assert!(m.degeneracy_index > 0.0 && m.degeneracy_index <= 1.0 / 3.0 + 1e-9);
     perturbed_starts(&aligner, &source, &truth, &[(30.0, 1.0, 0.0)]);
@@ -131,8 +133,11 @@ fn nonsense_pair_is_rejected() {
     let best = report.best().unwrap();
     eprintln!("nonsense: {:?}", best.rejected_because);
     assert!(!report.accepted);
-    assert_eq!(report.attempts.len(), 3, "every reseed tried");
+    assert_eq!(report.seeds.len(), 3, "every yaw seed scored");
+    assert!(!report.attempts.is_empty() && report.attempts.len() <= 3, "{} full attempts", report.attempts.len());
     assert!(report.attempts.iter().all(|a| !a.accepted && !a.rejected_because.is_empty()));
+    let failure = report.failure.as_deref().unwrap();
+    assert!(failure.contains("none of") && failure.contains("failed:"), "{failure}");
 }
 
 #[test]

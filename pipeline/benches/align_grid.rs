@@ -1,0 +1,265 @@
+//! Success-rate grid of the aligner against small_gicp and Open3D, from the same starts, in one run.
+//!
+//! `cargo bench -p starc-pipeline --bench align_grid` (release). For each scenario (the real pair
+//! in shared/data/registration; the simulated lab: the robot's map accumulated over its true poses
+//! against a 1 s window of the responder's rig, both through the Avia mock's packets):
+//! starts off the truth by yaw every 15 deg around the whole circle x translation 0, 0.75, 1.5,
+//! 2.25, 3 m (horizontal, in a direction that turns from trial to trial). Ours runs with the
+//! defaults (seed search on); the peers (tests/peers/align_peers.py: point-to-plane ICP at 0.25 m,
+//! single-threaded) from the same starts. Printed per method: success (within 5 cm and 0.5 deg;
+//! ours must also have accepted), error median / p99 over all trials, time median / p99, and the
+//! ratio of the peers' median time to ours. Then the basin of one attempt without the search.
+//!
+//! Environment: STARC_ALIGN_CONFIG (TOML overriding the defaults), STARC_ALIGN_NO_PEERS=1,
+//! STARC_ALIGN_NO_SIM=1, STARC_ALIGN_NO_BASIN=1, STARC_ALIGN_VERBOSE=1 (one line per trial).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+#[path = "align_sim/mod.rs"]
+mod align_sim;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use starc_pipeline::align::{cloud_points, pose_error, pose_from_rows, pose_rows, AlignConfig, Aligner, Vec3};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const SHIFTS_M: [f64; 5] = [0.0, 0.75, 1.5, 2.25, 3.0];
+const TOL_M: f64 = 0.05;
+const TOL_DEG: f64 = 0.5;
+
+/// Trial k's start: the truth turned by `yaw_deg` about its own position and shifted by `shift_m`
+/// in a direction that changes with k.
+fn start(truth: &Isometry3<f64>, k: usize, yaw_deg: f64, shift_m: f64) -> Isometry3<f64> {
+    let dir = (k as f64 * 137.5 + 20.0).to_radians();
+    Isometry3::from_parts(
+        Translation3::new(shift_m * dir.cos(), shift_m * dir.sin(), 0.0) * truth.translation,
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_deg.to_radians()) * truth.rotation,
+    )
+}
+
+/// One method's outcome on one trial.
+#[derive(Clone, Copy)]
+struct Outcome {
+    err_m: f64,
+    err_deg: f64,
+    ms: f64,
+    ok: bool,
+}
+
+fn pct(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1;
+    sorted[i]
+}
+
+fn sorted(v: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = v.collect();
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+struct Summary {
+    time_median_ms: f64,
+}
+
+fn summarize(name: &str, outcomes: &[Outcome]) -> Summary {
+    let n = outcomes.len();
+    let ok = outcomes.iter().filter(|o| o.ok).count();
+    let em = sorted(outcomes.iter().map(|o| o.err_m * 100.0));
+    let ed = sorted(outcomes.iter().map(|o| o.err_deg));
+    let t = sorted(outcomes.iter().map(|o| o.ms));
+    println!(
+        "| {name:<10} | {ok:>3}/{n:<3} {:>6.1} % | {:>7.2} / {:>8.2} | {:>6.3} / {:>7.3} | {:>7.1} / {:>7.1} |",
+        100.0 * ok as f64 / n.max(1) as f64,
+        pct(&em, 0.5),
+        pct(&em, 0.99),
+        pct(&ed, 0.5),
+        pct(&ed, 0.99),
+        pct(&t, 0.5),
+        pct(&t, 0.99),
+    );
+    Summary { time_median_ms: pct(&t, 0.5) }
+}
+
+fn write_f64(path: &Path, pts: &[Vec3]) {
+    let mut bytes = Vec::with_capacity(pts.len() * 24);
+    for p in pts {
+        for v in [p.x, p.y, p.z] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Runs the peers on the same clouds and starts; per peer, its outcome per trial.
+fn run_peers(
+    source: &[Vec3],
+    target: &[Vec3],
+    starts: &[Isometry3<f64>],
+    truth: &Isometry3<f64>,
+) -> Vec<(String, f64, Vec<Outcome>)> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let python = root.join(".venv/bin/python");
+    let dir = std::env::temp_dir().join(format!("starc_align_peers_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    write_f64(&dir.join("source.f64"), source);
+    write_f64(&dir.join("target.f64"), target);
+    let mut seeds = std::fs::File::create(dir.join("seeds.txt")).unwrap();
+    for s in starts {
+        let rows = pose_rows(s);
+        let line: Vec<String> = rows.iter().flatten().map(|v| format!("{v:.17e}")).collect();
+        writeln!(seeds, "{}", line.join(" ")).unwrap();
+    }
+    drop(seeds);
+    let out = Command::new(&python)
+        .arg(root.join("tests/peers/align_peers.py"))
+        .arg(&dir)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", python.display()));
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(out.status.success(), "align_peers.py: {}", String::from_utf8_lossy(&out.stderr));
+    let mut peers: Vec<(String, f64, Vec<Outcome>)> = Vec::new();
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        let peer = v["peer"].as_str().unwrap().to_string();
+        if let Some(ms) = v["prepare_ms"].as_f64() {
+            peers.push((peer, ms, Vec::new()));
+            continue;
+        }
+        let t: Vec<f64> = v["T"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let mut rows = [[0.0; 4]; 4];
+        for (i, x) in t.iter().enumerate() {
+            rows[i / 4][i % 4] = *x;
+        }
+        let (err_m, err_deg) = pose_from_rows(&rows).map_or((f64::INFINITY, 180.0), |p| pose_error(&p, truth));
+        let ms = v["ms"].as_f64().unwrap();
+        let entry = peers.iter_mut().find(|p| p.0 == peer).unwrap();
+        entry.2.push(Outcome { err_m, err_deg, ms, ok: err_m < TOL_M && err_deg < TOL_DEG });
+    }
+    peers
+}
+
+fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>, config: &AlignConfig) {
+    let verbose = std::env::var_os("STARC_ALIGN_VERBOSE").is_some();
+    println!("\n## {name}: source {} points, target {} points", source.len(), target.len());
+    let aligner = Aligner::new(target, config.clone()).unwrap();
+    println!("target preparation {:.1} ms", aligner.prepare_ms);
+    let mut starts = Vec::new();
+    let mut ours = Vec::new();
+    let mut attempts_hist = [0usize; 8];
+    for (si, &shift) in SHIFTS_M.iter().enumerate() {
+        for y in 0..24 {
+            let k = si * 24 + y;
+            let yaw = y as f64 * 15.0 - 180.0;
+            let s = start(truth, k, yaw, shift);
+            let r = aligner.align(source, &s);
+            let (err_m, err_deg) = pose_error(&r.pose, truth);
+            let ok = r.accepted && err_m < TOL_M && err_deg < TOL_DEG;
+            if verbose || !ok {
+                println!(
+                    "  trial yaw {yaw:+5.0} shift {shift:.2}: {} err {:.2} cm {:.3} deg {:.1} ms (seeds {:.1} ms) attempts {} best seed {:+.0} deg{}",
+                    if ok { "ok  " } else { "FAIL" },
+                    err_m * 100.0,
+                    err_deg,
+                    r.total_ms,
+                    r.seed_ms,
+                    r.attempts.len(),
+                    r.best().map_or(0.0, |a| a.seed_yaw_offset_deg),
+                    r.failure.as_ref().map_or(String::new(), |f| format!(" ({f})")),
+                );
+            }
+            attempts_hist[r.attempts.len().min(7)] += 1;
+            starts.push(s);
+            ours.push(Outcome { err_m, err_deg, ms: r.total_ms, ok });
+        }
+    }
+    let peers = if std::env::var_os("STARC_ALIGN_NO_PEERS").is_some() {
+        Vec::new()
+    } else {
+        run_peers(source, target, &starts, truth)
+    };
+    println!(
+        "\n{} trials: yaw every 15 deg x shift {SHIFTS_M:?} m; success = within {} cm and {TOL_DEG} deg (ours: and accepted)",
+        starts.len(),
+        TOL_M * 100.0
+    );
+    println!("| method     | success          | err cm med / p99  | err deg med / p99 | ms med / p99      |");
+    println!("|------------|------------------|-------------------|-------------------|-------------------|");
+    let mine = summarize("STARC", &ours);
+    let mut ratios = Vec::new();
+    for (peer, prep, outcomes) in &peers {
+        let s = summarize(peer, outcomes);
+        ratios
+            .push(format!("{peer} {:.2}x (its preparation {prep:.1} ms once)", s.time_median_ms / mine.time_median_ms));
+    }
+    println!(
+        "full attempts per trial (1..): {:?}; peers' median time / ours: {}",
+        &attempts_hist[1..],
+        if ratios.is_empty() { "peers not run".to_string() } else { ratios.join(", ") }
+    );
+}
+
+/// Single attempts (search off) from yaw errors 0..180 deg by 10 (both signs) at each shift:
+/// the largest yaw below which every start converged.
+fn basin(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>, config: &AlignConfig) {
+    let single = Aligner::new(target, AlignConfig { reseed_yaw_step_deg: 0.0, ..config.clone() }).unwrap();
+    println!("\n{name}: basin of one attempt (no search); '+' = converged from +yaw and -yaw (4 shift directions)");
+    for shift in SHIFTS_M {
+        let mut row = String::new();
+        let mut basin = None;
+        for k in 0..=18 {
+            let yaw = f64::from(k) * 10.0;
+            let ok = (0..4).all(|d| {
+                [yaw, -yaw].iter().all(|y| {
+                    let r = single.align(source, &start(truth, d * 6 + 1, *y, shift));
+                    let (t, a) = pose_error(&r.pose, truth);
+                    r.accepted && t < TOL_M && a < TOL_DEG
+                })
+            });
+            row.push(if ok { '+' } else { '.' });
+            if !ok && basin.is_none() {
+                basin = Some(yaw - 10.0);
+            }
+        }
+        println!(
+            "  shift {shift:.2} m, yaw 0..180 by 10: {row}  every start within +-{} deg converged",
+            basin.unwrap_or(180.0)
+        );
+    }
+}
+
+fn real_pair() -> (Vec<Vec3>, Vec<Vec3>, Isometry3<f64>) {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/registration");
+    let source = cloud_points(&starc_pipeline::cloud::read(&dir.join("source.ply")).expect("shared/data/registration"));
+    let target = cloud_points(&starc_pipeline::cloud::read(&dir.join("target.ply")).unwrap());
+    let v: Vec<f64> = std::fs::read_to_string(dir.join("T_target_source.txt"))
+        .unwrap()
+        .split_whitespace()
+        .map(|t| t.parse().unwrap())
+        .collect();
+    let mut rows = [[0.0; 4]; 4];
+    for (i, x) in v.iter().enumerate() {
+        rows[i / 4][i % 4] = *x;
+    }
+    (source, target, pose_from_rows(&rows).unwrap())
+}
+
+fn main() {
+    let config = AlignConfig::from_toml(&std::env::var("STARC_ALIGN_CONFIG").unwrap_or_default()).unwrap();
+    let (source, target, truth) = real_pair();
+    scenario("real pair (shared/data/registration)", &source, &target, &truth, &config);
+    let sim = if std::env::var_os("STARC_ALIGN_NO_SIM").is_some() { None } else { Some(align_sim::lab_pair()) };
+    if let Some(p) = &sim {
+        println!("\nsimulated pair: {}", p.describe);
+        scenario("simulated lab", &p.source, &p.target, &p.truth, &config);
+    }
+    if std::env::var_os("STARC_ALIGN_NO_BASIN").is_none() {
+        basin("real pair", &source, &target, &truth, &config);
+        if let Some(p) = &sim {
+            basin("simulated lab", &p.source, &p.target, &p.truth, &config);
+        }
+    }
+}
