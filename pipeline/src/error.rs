@@ -25,6 +25,15 @@ pub enum PipelineError {
     /// Neither the first bytes nor the file name tell the point-cloud format.
     #[error("{path}: unknown point-cloud format (expected .pcd, .ply or KITTI .bin)")]
     UnknownFormat { path: String },
+    /// A CDR payload (ROS 2 message) that does not decode (`offset` counts from the payload start).
+    #[error("CDR {type_name} at byte {offset}: {reason}")]
+    BadCdr { type_name: &'static str, offset: usize, reason: String },
+    /// The MCAP library refused to write or read a recording.
+    #[error("MCAP {context}: {source}")]
+    Mcap { context: String, source: mcap::McapError },
+    /// A recording call that cannot be honoured (after `finish`, or a value ROS cannot hold).
+    #[error("recording: {reason}")]
+    Recording { reason: String },
 }
 
 impl PipelineError {
