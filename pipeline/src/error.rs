@@ -34,6 +34,12 @@ pub enum PipelineError {
     /// A recording call that cannot be honoured (after `finish`, or a value ROS cannot hold).
     #[error("recording: {reason}")]
     Recording { reason: String },
+    /// A pose asked for outside the span of a timed pose buffer (or of an empty one).
+    #[error("no pose at {t_ns} ns: the buffer spans {first_ns}..={last_ns} ns ({len} poses)")]
+    PoseOutOfRange { t_ns: u64, first_ns: u64, last_ns: u64, len: usize },
+    /// A pose pushed out of time order (or a non-finite one).
+    #[error("pose at {t_ns} ns refused: {reason}")]
+    BadPose { t_ns: u64, reason: String },
 }
 
 impl PipelineError {

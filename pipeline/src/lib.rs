@@ -4,12 +4,14 @@
 //! - [`cloud`]: point clouds and their files (PCD, PLY, KITTI .bin).
 //! - [`align`]: registration of one cloud against another (NDT, then point-to-plane ICP).
 //! - [`lio`]: LiDAR-inertial odometry (IMU propagation, de-skew, iterated Kalman update, iVox map).
+//! - [`pose`]: the responder's world pose (composition, interpolation, drift correction).
 //! - [`record`]: MCAP recordings of ROS 2 messages (CDR), written crash-safe and read back.
 
 pub mod align;
 pub mod cloud;
 pub mod error;
 pub mod lio;
+pub mod pose;
 pub mod record;
 
 pub use error::PipelineError;

@@ -1,0 +1,193 @@
+//! The rig's pose in the world: composition of the registration with the rig's odometry, and
+//! drift correction applied in bounded steps.
+//!
+//! Frames: `w` the world (the robot's map frame, whatever device booted first), `o` the rig's
+//! odometry frame (where its LIO started), `fpv` the rig's LiDAR. The rig's LIO gives `oT_fpv(t)`;
+//! an accepted registration gives `wT_fpv(tk)`, hence `wT_o = wT_fpv(tk) · oT_fpv(tk)⁻¹` and
+//! `wT_fpv(t) = wT_o · oT_fpv(t) = wT_fpv(tk) · ΔT_fpv(tk → t)` (the paper's composition).
+//! A later registration gives a new `wT_o` (the LIO has drifted); the applied one moves towards it
+//! by at most `max_step_m` / `max_step_deg` per rendered frame, measured at the rig, so the
+//! overlay slides instead of jumping.
+
+use super::buffer::PoseBuffer;
+use crate::PipelineError;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+
+/// Settings (TOML, `config/world_pose.toml`); every field has a default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldPoseConfig {
+    /// Rig odometry poses kept (10 s at 200 Hz by default): a registration must refer to a time
+    /// still inside, and so must every render time.
+    pub buffer_len: usize,
+    /// Largest correction applied per rendered frame, at the rig (translation, m; rotation, deg).
+    /// 5 mm and 0.1 deg per frame at 30 Hz: 15 cm/s and 3 deg/s, below what a viewer notices
+    /// against a walking responder's own motion, and far above LIO drift rates.
+    pub max_step_m: f64,
+    pub max_step_deg: f64,
+    /// A correction larger than this is applied at once: it is a re-localisation, not drift, and
+    /// sliding there would show a wrong overlay for seconds.
+    pub snap_m: f64,
+    pub snap_deg: f64,
+}
+
+impl Default for WorldPoseConfig {
+    fn default() -> Self {
+        Self { buffer_len: 2000, max_step_m: 0.005, max_step_deg: 0.1, snap_m: 1.0, snap_deg: 10.0 }
+    }
+}
+
+impl WorldPoseConfig {
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let c: Self = toml::from_str(text)
+            .map_err(|e| PipelineError::BadFile { format: "world pose config", reason: e.to_string() })?;
+        let positive = [c.max_step_m, c.max_step_deg, c.snap_m, c.snap_deg];
+        if c.buffer_len < 2 || positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(PipelineError::BadFile {
+                format: "world pose config",
+                reason: "buffer_len must be at least 2 and the steps and snap limits positive".into(),
+            });
+        }
+        Ok(c)
+    }
+}
+
+/// Whether the rig's pose in the world is known yet.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum WorldPoseState {
+    /// No accepted registration yet: the rig runs in its odometry frame, nothing is rendered.
+    Unaligned,
+    /// Aligned; the correction in use has reached the latest registration.
+    Aligned,
+    /// Aligned; the correction in use is still sliding towards the latest registration.
+    Correcting,
+}
+
+/// What one frame's step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct CorrectionStep {
+    /// The step applied at the rig (m, deg).
+    pub step_m: f64,
+    pub step_deg: f64,
+    /// What is left after it (m, deg).
+    pub remaining_m: f64,
+    pub remaining_deg: f64,
+}
+
+/// The rig's world pose: its odometry, the correction in use (`wT_o`) and the target one.
+#[derive(Clone, Debug)]
+pub struct WorldPose {
+    config: WorldPoseConfig,
+    odom: PoseBuffer,
+    applied: Option<Isometry3<f64>>,
+    target: Option<Isometry3<f64>>,
+    /// Registrations taken, and how many of them snapped.
+    pub registrations: u32,
+    pub snaps: u32,
+}
+
+impl WorldPose {
+    pub fn new(config: WorldPoseConfig) -> Self {
+        Self {
+            odom: PoseBuffer::new(config.buffer_len),
+            config,
+            applied: None,
+            target: None,
+            registrations: 0,
+            snaps: 0,
+        }
+    }
+
+    pub fn state(&self) -> WorldPoseState {
+        match (&self.applied, &self.target) {
+            (Some(a), Some(t)) if a != t => WorldPoseState::Correcting,
+            (Some(_), _) => WorldPoseState::Aligned,
+            _ => WorldPoseState::Unaligned,
+        }
+    }
+
+    /// The rig's odometry `oT_fpv` at `t_ns` (from its LIO; strictly increasing times).
+    pub fn push_odometry(&mut self, t_ns: u64, o_t_fpv: Isometry3<f64>) -> Result<(), PipelineError> {
+        self.odom.push(t_ns, o_t_fpv)
+    }
+
+    pub fn odometry(&self) -> &PoseBuffer {
+        &self.odom
+    }
+
+    /// An accepted registration: the rig's LiDAR pose in the world at `t_ns` (the time the
+    /// registered window refers to, inside the odometry buffer). The first one is applied at once;
+    /// later ones become the target the correction slides to (or snaps to, past the snap limits).
+    pub fn push_registration(&mut self, t_ns: u64, w_t_fpv: Isometry3<f64>) -> Result<(), PipelineError> {
+        let o_t_fpv = self.odom.at(t_ns)?;
+        let w_t_o = w_t_fpv * o_t_fpv.inverse();
+        self.registrations += 1;
+        let snap = match (&self.applied, self.odom.latest()) {
+            (None, _) | (_, None) => true,
+            (Some(applied), Some((_, now))) => {
+                let (m, deg) = at_rig(applied, &w_t_o, &now);
+                m > self.config.snap_m || deg > self.config.snap_deg
+            }
+        };
+        if snap {
+            if self.applied.is_some() {
+                self.snaps += 1;
+            }
+            self.applied = Some(w_t_o);
+        }
+        self.target = Some(w_t_o);
+        Ok(())
+    }
+
+    /// Moves the correction in use one rendered frame towards the latest registration, by at most
+    /// the configured step at the rig's latest odometry pose. Call once per rendered frame.
+    pub fn step_frame(&mut self) -> CorrectionStep {
+        let (Some(applied), Some(target), Some((_, now))) = (self.applied, self.target, self.odom.latest()) else {
+            return CorrectionStep::default();
+        };
+        // The correction seen from the rig: E = (applied·now)⁻¹ · (target·now).
+        let from = applied * now;
+        let e = from.inverse() * (target * now);
+        let (m, deg) = (e.translation.vector.norm(), e.rotation.angle().to_degrees());
+        let f = [(m, self.config.max_step_m), (deg, self.config.max_step_deg)]
+            .iter()
+            .map(|&(have, max)| if have > max { max / have } else { 1.0 })
+            .fold(1.0f64, f64::min);
+        let (step, remaining) = if f >= 1.0 {
+            self.applied = Some(target);
+            (e, Isometry3::identity())
+        } else {
+            let step = Isometry3::from_parts(
+                Translation3::from(e.translation.vector * f),
+                UnitQuaternion::from_scaled_axis(e.rotation.scaled_axis() * f),
+            );
+            self.applied = Some(from * step * now.inverse());
+            (step, step.inverse() * e)
+        };
+        CorrectionStep {
+            step_m: step.translation.vector.norm(),
+            step_deg: step.rotation.angle().to_degrees(),
+            remaining_m: remaining.translation.vector.norm(),
+            remaining_deg: remaining.rotation.angle().to_degrees(),
+        }
+    }
+
+    /// `wT_fpv` at `t_ns` (a render time inside the odometry buffer): `None` while unaligned;
+    /// an error outside the buffer.
+    pub fn world_pose(&self, t_ns: u64) -> Result<Option<Isometry3<f64>>, PipelineError> {
+        let o_t_fpv = self.odom.at(t_ns)?;
+        Ok(self.applied.map(|w_t_o| w_t_o * o_t_fpv))
+    }
+
+    /// The correction in use (`wT_o`), once aligned.
+    pub fn correction(&self) -> Option<Isometry3<f64>> {
+        self.applied
+    }
+}
+
+/// How far apart two world corrections put the rig at odometry pose `now` (m, deg).
+fn at_rig(a: &Isometry3<f64>, b: &Isometry3<f64>, now: &Isometry3<f64>) -> (f64, f64) {
+    let e = (a * now).inverse() * (b * now);
+    (e.translation.vector.norm(), e.rotation.angle().to_degrees())
+}
