@@ -6,9 +6,11 @@
 //! - [`lio`]: LiDAR-inertial odometry (IMU propagation, de-skew, iterated Kalman update, iVox map).
 //! - [`pose`]: the responder's world pose (composition, interpolation, drift correction).
 //! - [`record`]: MCAP recordings of ROS 2 messages (CDR), written crash-safe and read back.
+//! - [`detect`]: people in a window of points (oriented boxes, scores, their points).
 
 pub mod align;
 pub mod cloud;
+pub mod detect;
 pub mod error;
 pub mod lio;
 pub mod pose;

@@ -1,0 +1,142 @@
+//! Tunables of the geometric person detector, loaded from TOML (`config/detect.toml`); every
+//! field has a default.
+
+use crate::PipelineError;
+use serde::{Deserialize, Serialize};
+
+/// Settings of [`crate::detect::GeometricDetector`]. Heights are above the estimated floor;
+/// lengths in metres. The defaults were tuned on the simulator's lab and tactical scenarios
+/// (seed 1) and checked on all four shipped scenarios (docs/detect.md).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectConfig {
+    /// Bin of the z histograms that find the floor and the ceiling.
+    pub floor_bin_m: f64,
+    /// A histogram bin is a floor candidate when it holds at least this share of the fullest bin
+    /// below the sensor; the lowest candidate wins (a stage or table top is not the floor).
+    pub floor_min_share: f64,
+    /// Points closer than this to the fitted floor plane are floor.
+    pub floor_band_m: f64,
+    /// A ceiling is only assumed when its bin holds at least this many points.
+    pub ceiling_min_points: usize,
+    /// Points closer than this below the ceiling are ceiling.
+    pub ceiling_band_m: f64,
+    /// Voxel size of the downsampled cloud the clusters are built on (26-connected voxels join).
+    pub voxel_m: f64,
+    /// A cluster needs at least this many points (of the window, before downsampling).
+    pub min_points: usize,
+    /// Clusters bigger than any person are split by peeling off planes (walls, table tops, box
+    /// faces) and clustering what remains. A peeled plane must reach this far along its longer in-plane axis...
+    pub plane_min_length_m: f64,
+    /// ... and this far along its shorter one (smaller planes can be part of a person).
+    pub plane_min_width_m: f64,
+    /// Distance of a voxel centre to a plane to count as on it.
+    pub plane_tolerance_m: f64,
+    /// At most this many planes are peeled off one cluster.
+    pub max_planes: usize,
+    /// Upright people (standing, walking): vertical extent.
+    pub upright_height_m: [f64; 2],
+    /// Sitting or crouching people: vertical extent.
+    pub low_height_m: [f64; 2],
+    /// People lying on the floor: vertical extent.
+    pub lying_height_m: [f64; 2],
+    /// Longest horizontal side of an upright or low person's box.
+    pub upright_max_length_m: f64,
+    /// Horizontal sides of a lying person's box: length range and largest width.
+    pub lying_length_m: [f64; 2],
+    pub lying_max_width_m: f64,
+    /// The lowest point of a person is at most this high (feet on the floor or a stage; people
+    /// seen above furniture start higher).
+    pub max_bottom_m: f64,
+    /// Distance of a point to its cluster's box to count as on a face of it.
+    pub face_tolerance_m: f64,
+    /// Boxes (furniture, clutter, walls) put nearly all their points on the faces of their
+    /// bounding box, standing and sitting people do not: such clusters with a larger share are
+    /// rejected (soft gate; not applied to lying people, whose low round bodies are all face).
+    pub max_face_share: f64,
+    /// Planarity ((l2 - l3) / l1 of the voxel covariance) above which a cluster is a plane.
+    pub max_planarity: f64,
+    /// Upright, sitting and crouching people are at least this thick (RMS distance of their
+    /// points to their best-fit plane); wall strips, door jambs and table sides are thinner.
+    pub min_thickness_m: f64,
+    /// Detections scoring below this are dropped.
+    pub min_score: f64,
+}
+
+impl Default for DetectConfig {
+    fn default() -> Self {
+        Self {
+            floor_bin_m: 0.05,
+            floor_min_share: 0.3,
+            floor_band_m: 0.06,
+            ceiling_min_points: 200,
+            ceiling_band_m: 0.15,
+            voxel_m: 0.1,
+            min_points: 25,
+            plane_min_length_m: 0.9,
+            plane_min_width_m: 0.45,
+            plane_tolerance_m: 0.05,
+            max_planes: 4,
+            upright_height_m: [1.2, 2.1],
+            low_height_m: [0.55, 1.35],
+            lying_height_m: [0.1, 0.5],
+            upright_max_length_m: 1.1,
+            lying_length_m: [0.7, 2.2],
+            lying_max_width_m: 0.8,
+            max_bottom_m: 1.2,
+            face_tolerance_m: 0.04,
+            max_face_share: 0.6,
+            max_planarity: 0.25,
+            min_thickness_m: 0.02,
+            min_score: 0.5,
+        }
+    }
+}
+
+impl DetectConfig {
+    /// Reads a TOML file; fields left out keep their defaults, unknown fields are an error.
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let config: Self = toml::from_str(text).map_err(|e| bad(&e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Rejects settings the detector cannot work with.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let positive = [
+            self.floor_bin_m,
+            self.floor_band_m,
+            self.ceiling_band_m,
+            self.voxel_m,
+            self.plane_min_length_m,
+            self.plane_min_width_m,
+            self.plane_tolerance_m,
+            self.upright_max_length_m,
+            self.lying_max_width_m,
+            self.face_tolerance_m,
+            self.min_thickness_m,
+        ];
+        if positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(bad("bins, bands, voxel sizes, extents and tolerances must be positive"));
+        }
+        if self.voxel_m < 0.02 {
+            return Err(bad("voxel_m below 0.02 m would make the voxel grid explode"));
+        }
+        let ranges = [self.upright_height_m, self.low_height_m, self.lying_height_m, self.lying_length_m];
+        if ranges.iter().any(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && *lo >= 0.0 && lo < hi)) {
+            return Err(bad("every [min, max] range needs 0 <= min < max"));
+        }
+        let shares = [self.floor_min_share, self.max_face_share, self.max_planarity, self.min_score];
+        if shares.iter().any(|v| !(*v >= 0.0 && *v <= 1.0)) {
+            return Err(bad("floor_min_share, max_face_share, max_planarity and min_score must be in [0, 1]"));
+        }
+        if !self.max_bottom_m.is_finite() {
+            return Err(bad("max_bottom_m must be finite"));
+        }
+        Ok(())
+    }
+}
+
+fn bad(reason: &str) -> PipelineError {
+    PipelineError::BadFile { format: "detect config", reason: reason.to_string() }
+}

@@ -1,0 +1,170 @@
+//! Geometry of one cluster: its oriented box (minimum-area rectangle over the floor, height
+//! above it), shape of its voxel covariance, and how many of its points lie on the box's faces.
+
+use super::cluster::Grid;
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// What the scorer knows about a cluster. Heights are above the floor; x, y in the world.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClusterFeatures {
+    /// Points of the window in the cluster, and occupied voxels.
+    pub points: usize,
+    pub voxels: usize,
+    /// Box centre (x, y in the world, height above floor), size (length along `yaw_rad` >= width,
+    /// height) and heading of the length axis.
+    pub centre: Vector3<f64>,
+    pub size: Vector3<f64>,
+    pub yaw_rad: f64,
+    /// Lowest and highest point above the floor.
+    pub bottom_m: f64,
+    pub top_m: f64,
+    /// Share of the points within the face tolerance of a side or the top of the box.
+    pub face_share: f64,
+    /// From the eigenvalues l1 >= l2 >= l3 of the voxel centres' covariance.
+    pub linearity: f64,
+    pub planarity: f64,
+    /// Root-mean-square distance of the points to their best-fit plane (the square root of the
+    /// smallest eigenvalue of their covariance): a wall strip, table side or box face is a few
+    /// centimetres thick (range noise), a body is thicker.
+    pub thickness_m: f64,
+    /// Horizontal distance from the sensor to the box centre.
+    pub range_m: f64,
+}
+
+/// Distance of a voxel centre to a side of the rectangle to count as on it (centres sit up to
+/// half a voxel inside a face).
+const EDGE_TOLERANCE_M: f64 = 0.06;
+
+/// `points` maps a window index to (x, y, height above floor).
+pub fn features(
+    grid: &Grid,
+    cluster: &[u32],
+    points: &dyn Fn(u32) -> Option<Vector3<f64>>,
+    sensor_xy: [f64; 2],
+    face_tolerance_m: f64,
+) -> Option<ClusterFeatures> {
+    let centres: Vec<Vector3<f64>> =
+        cluster.iter().filter_map(|&v| grid.voxels.get(v as usize)).map(|v| v.centre).collect();
+    if centres.is_empty() {
+        return None;
+    }
+    let raw: Vec<Vector3<f64>> = cluster.iter().flat_map(|&v| grid.points_of(v)).filter_map(|&i| points(i)).collect();
+    if raw.is_empty() {
+        return None;
+    }
+
+    // Heading: the rectangle whose sides carry the most voxel centres (a box's faces, seen as
+    // an L from a corner, fit only when aligned; the minimum-area rectangle of an L is
+    // ambiguous), the smaller area breaking ties. 3 deg steps, then 0.5 deg around the best.
+    let support = |yaw: f64| {
+        let (s, c) = yaw.sin_cos();
+        let (mut a0, mut a1, mut b0, mut b1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for p in &centres {
+            let (a, b) = (c * p.x + s * p.y, -s * p.x + c * p.y);
+            a0 = a0.min(a);
+            a1 = a1.max(a);
+            b0 = b0.min(b);
+            b1 = b1.max(b);
+        }
+        let on = centres
+            .iter()
+            .filter(|p| {
+                let (a, b) = (c * p.x + s * p.y, -s * p.x + c * p.y);
+                (a - a0).min(a1 - a).min(b - b0).min(b1 - b) < EDGE_TOLERANCE_M
+            })
+            .count();
+        on as f64 - (a1 - a0) * (b1 - b0)
+    };
+    let coarse = (0..30).map(|k| f64::from(k).to_radians() * 3.0);
+    let best = coarse.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(0.0);
+    let fine = (-6..=6).map(|k| best + f64::from(k).to_radians() * 0.5);
+    let yaw = fine.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(best);
+
+    // Box of the raw points in that frame.
+    let (s, c) = yaw.sin_cos();
+    let local = |p: &Vector3<f64>| Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z);
+    let mut lo = Vector3::repeat(f64::MAX);
+    let mut hi = Vector3::repeat(f64::MIN);
+    for p in &raw {
+        let q = local(p);
+        lo = lo.inf(&q);
+        hi = hi.sup(&q);
+    }
+    let size = hi - lo;
+    let mid = (lo + hi) / 2.0;
+    let centre = Vector3::new(c * mid.x - s * mid.y, s * mid.x + c * mid.y, mid.z);
+    // Points on a side or the top (the bottom is cut by the floor band), against faces placed
+    // at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
+    // outside it, and the extremes would move the faces off the bulk.
+    let stride = (raw.len() / 600).max(1);
+    let sample: Vec<Vector3<f64>> = raw.iter().step_by(stride).map(local).collect();
+    let quantiles = |axis: usize| {
+        let mut v: Vec<f64> = sample.iter().map(|q| q[axis]).collect();
+        v.sort_unstable_by(f64::total_cmp);
+        let at = |f: f64| v.get(((v.len() - 1) as f64 * f).round() as usize).copied().unwrap_or(0.0);
+        (at(0.02), at(0.98))
+    };
+    let ((x0, x1), (y0, y1), (_, z1)) = (quantiles(0), quantiles(1), quantiles(2));
+    let on = sample
+        .iter()
+        .filter(|q| {
+            let d = (q.x - x0)
+                .abs()
+                .min((x1 - q.x).abs())
+                .min((q.y - y0).abs())
+                .min((y1 - q.y).abs())
+                .min((z1 - q.z).abs());
+            d < face_tolerance_m
+        })
+        .count();
+    let seen = sample.len();
+    // Thickness from the raw points (the voxel centres are smoothed).
+    let rn = raw.iter().step_by(stride).count().max(1) as f64;
+    let rmean = raw.iter().step_by(stride).sum::<Vector3<f64>>() / rn;
+    let mut rcov = Matrix3::zeros();
+    for p in raw.iter().step_by(stride) {
+        let q = p - rmean;
+        rcov += q * q.transpose();
+    }
+    let thickness_m = SymmetricEigen::new(rcov / rn).eigenvalues.min().max(0.0).sqrt();
+    let (length, width, yaw) =
+        if size.x >= size.y { (size.x, size.y, yaw) } else { (size.y, size.x, yaw + std::f64::consts::FRAC_PI_2) };
+
+    let n = centres.len() as f64;
+    let mean = centres.iter().sum::<Vector3<f64>>() / n;
+    let mut cov = Matrix3::zeros();
+    for p in &centres {
+        let q = p - mean;
+        cov += q * q.transpose();
+    }
+    let mut ev: Vec<f64> = SymmetricEigen::new(cov / n).eigenvalues.iter().map(|e| e.max(0.0)).collect();
+    ev.sort_by(|a, b| b.total_cmp(a));
+    let (l1, l2, l3) =
+        (ev.first().copied().unwrap_or(0.0), ev.get(1).copied().unwrap_or(0.0), ev.get(2).copied().unwrap_or(0.0));
+    let (linearity, planarity) = if l1 > 0.0 { ((l1 - l2) / l1, (l2 - l3) / l1) } else { (0.0, 0.0) };
+
+    Some(ClusterFeatures {
+        points: raw.len(),
+        voxels: centres.len(),
+        centre,
+        size: Vector3::new(length, width, size.z),
+        yaw_rad: wrap(yaw),
+        bottom_m: lo.z,
+        top_m: hi.z,
+        face_share: on as f64 / seen.max(1) as f64,
+        linearity,
+        planarity,
+        thickness_m,
+        range_m: (centre.x - sensor_xy[0]).hypot(centre.y - sensor_xy[1]),
+    })
+}
+
+/// Heading in (-pi/2, pi/2]: a box is the same turned by half a turn.
+fn wrap(yaw: f64) -> f64 {
+    let pi = std::f64::consts::PI;
+    let mut y = yaw.rem_euclid(pi);
+    if y > pi / 2.0 {
+        y -= pi;
+    }
+    y
+}

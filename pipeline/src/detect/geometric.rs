@@ -1,0 +1,153 @@
+//! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
+//! clusters, each cluster scored as a person.
+
+use super::classify::{score, too_big};
+use super::cluster::{peel_plane, Grid};
+use super::features::features;
+use super::floor::estimate_floor;
+use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel};
+use crate::PipelineError;
+use nalgebra::Vector3;
+
+/// Geometric person detector (see the module docs). Holds no state between windows beyond
+/// scratch space.
+pub struct GeometricDetector {
+    cfg: DetectConfig,
+    kept: Vec<(u32, Vector3<f64>)>,
+    /// The last window's floor and clusters, for diagnosis and tuning.
+    last_floor: Option<FloorModel>,
+    last_clusters: Vec<(ClusterFeatures, f64)>,
+    /// When set, the points of every scored cluster are kept too (tuning; costs allocations).
+    keep_cluster_points: bool,
+    last_cluster_points: Vec<Vec<u32>>,
+}
+
+impl GeometricDetector {
+    pub fn new(cfg: DetectConfig) -> Result<Self, PipelineError> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg,
+            kept: Vec::new(),
+            last_floor: None,
+            last_clusters: Vec::new(),
+            keep_cluster_points: false,
+            last_cluster_points: Vec::new(),
+        })
+    }
+
+    pub fn config(&self) -> &DetectConfig {
+        &self.cfg
+    }
+
+    /// The floor estimated in the last window.
+    pub fn last_floor(&self) -> Option<FloorModel> {
+        self.last_floor
+    }
+
+    /// Every cluster of the last window that was scored, with its score (people and rejects).
+    pub fn last_clusters(&self) -> &[(ClusterFeatures, f64)] {
+        &self.last_clusters
+    }
+
+    /// Keep the point indices of every scored cluster (for tuning the scorer on labelled data).
+    pub fn keep_cluster_points(&mut self, keep: bool) {
+        self.keep_cluster_points = keep;
+    }
+
+    /// The points of each of [`Self::last_clusters`], when kept.
+    pub fn last_cluster_points(&self) -> &[Vec<u32>] {
+        &self.last_cluster_points
+    }
+}
+
+impl Detector for GeometricDetector {
+    fn name(&self) -> &'static str {
+        "geometric"
+    }
+
+    fn detect(&mut self, window: &DetectWindow<'_>, out: &mut Vec<Detection>) {
+        let cfg = &self.cfg;
+        self.last_clusters.clear();
+        self.last_cluster_points.clear();
+        let sensor = window.sensor_pose.translation.vector;
+        let floor = estimate_floor(window.points, sensor.z, cfg);
+        self.last_floor = Some(floor);
+        let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
+
+        self.kept.clear();
+        for (i, p) in window.points.iter().enumerate() {
+            let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
+            let h = floor.height(x, y, f64::from(p.z_m));
+            // Beyond 10 km is garbage, and would overflow the voxel keys.
+            let sane = x.abs() < 1e4 && y.abs() < 1e4 && h.abs() < 1e4;
+            if h > cfg.floor_band_m && h < top && sane {
+                self.kept.push((i as u32, Vector3::new(x, y, h)));
+            }
+        }
+        let grid = Grid::new(&self.kept, cfg.voxel_m);
+        let all: Vec<u32> = (0..grid.voxels.len() as u32).collect();
+        let points = window.points;
+        let lookup = |i: u32| {
+            points.get(i as usize).map(|p| {
+                let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
+                Vector3::new(x, y, floor.height(x, y, f64::from(p.z_m)))
+            })
+        };
+        // Voxels needed before a cluster is worth scoring: a person at the far end of the
+        // window still fills a few.
+        let min_voxels = 3;
+        let mut stack: Vec<(Vec<u32>, usize)> = grid.components(&all).into_iter().map(|c| (c, 0)).collect();
+        while let Some((cluster, depth)) = stack.pop() {
+            if cluster.len() < min_voxels {
+                continue;
+            }
+            let npts: usize = cluster.iter().map(|&v| grid.points_of(v).len()).sum();
+            if npts < cfg.min_points {
+                continue;
+            }
+            let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m) else {
+                continue;
+            };
+            let (pose, s) = score(&f, cfg);
+            if self.keep_cluster_points {
+                self.last_cluster_points.push(cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect());
+            }
+            if s >= cfg.min_score {
+                let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;
+                let (bottom, height) = if floor_touch { (0.0, f.top_m) } else { (f.bottom_m, f.size.z) };
+                let cx = f.centre.x;
+                let cy = f.centre.y;
+                let cz = floor.a * cx + floor.b * cy + floor.c + bottom + height / 2.0;
+                let mut idx: Vec<u32> = cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect();
+                idx.sort_unstable();
+                out.push(Detection {
+                    stamp: window.stamp,
+                    centre_m: Vector3::new(cx, cy, cz),
+                    size_m: Vector3::new(f.size.x, f.size.y, height),
+                    yaw_rad: f.yaw_rad,
+                    score: s,
+                    pose,
+                    point_indices: idx,
+                });
+                self.last_clusters.push((f, s));
+                continue;
+            }
+            let split = depth < cfg.max_planes && too_big(&f, cfg);
+            self.last_clusters.push((f, s));
+            if !split {
+                continue;
+            }
+            let peeled = peel_plane(
+                &grid,
+                &cluster,
+                cfg.plane_tolerance_m,
+                cfg.plane_min_length_m,
+                cfg.plane_min_width_m,
+                depth as u64,
+            );
+            if let Some((_, rest)) = peeled {
+                stack.extend(grid.components(&rest).into_iter().map(|c| (c, depth + 1)));
+            }
+        }
+    }
+}

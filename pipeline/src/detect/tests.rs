@@ -1,0 +1,187 @@
+//! Synthetic scenes: a floor, a ceiling, a wall, a box and people made of sampled surfaces
+//! (no occlusion: only the half of each body facing the sensor is sampled).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use super::eval::{match_window, MatchRule, TruthPerson};
+use super::*;
+use nalgebra::{Isometry3, Vector3};
+use starc_time::{Clock, Stamp};
+
+fn push(out: &mut Vec<WindowPoint>, x: f64, y: f64, z: f64) {
+    out.push(WindowPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns: 0 });
+}
+
+/// A cheap deterministic jitter in [-a, a] (range noise).
+fn jitter(i: usize, a: f64) -> f64 {
+    let h = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40;
+    (h as f64 / (1u64 << 24) as f64 * 2.0 - 1.0) * a
+}
+
+fn grid(out: &mut Vec<WindowPoint>, a: [f64; 2], b: [f64; 2], step: f64, f: impl Fn(f64, f64) -> [f64; 3]) {
+    let (mut u, mut i) = (a[0], out.len());
+    while u <= a[1] {
+        let mut v = b[0];
+        while v <= b[1] {
+            let [x, y, z] = f(u, v);
+            push(out, x + jitter(i, 0.01), y + jitter(i + 1, 0.01), z + jitter(i + 2, 0.01));
+            i += 3;
+            v += step;
+        }
+        u += step;
+    }
+}
+
+/// The half of a vertical cylinder facing the sensor at the origin.
+fn cylinder(out: &mut Vec<WindowPoint>, c: [f64; 2], r: f64, z: [f64; 2]) {
+    let facing = (-c[1]).atan2(-c[0]);
+    grid(out, [-1.5, 1.5], z, 0.03, |a, h| {
+        let t = facing + a;
+        [c[0] + r * t.cos(), c[1] + r * t.sin(), h]
+    });
+}
+
+/// Floor, ceiling, a wall, a box, a standing person and a lying person.
+fn scene() -> Vec<WindowPoint> {
+    let mut p = Vec::new();
+    grid(&mut p, [0.5, 8.0], [-3.0, 3.0], 0.08, |x, y| [x, y, 0.0]);
+    grid(&mut p, [2.0, 8.0], [-3.0, 3.0], 0.15, |x, y| [x, y, 2.8]);
+    grid(&mut p, [-3.0, 3.0], [0.0, 2.8], 0.05, |y, z| [8.0, y, z]);
+    // A 0.5 m cardboard box at (3, -1.8): front face, side and top.
+    grid(&mut p, [-2.05, -1.55], [0.0, 0.6], 0.03, |y, z| [2.75, y, z]);
+    grid(&mut p, [2.75, 3.25], [0.0, 0.6], 0.03, |x, z| [x, -1.55, z]);
+    grid(&mut p, [2.75, 3.25], [-2.05, -1.55], 0.03, |x, y| [x, y, 0.6]);
+    // Standing person at (4, 1): legs, torso, head.
+    cylinder(&mut p, [4.0, 0.9], 0.08, [0.0, 0.85]);
+    cylinder(&mut p, [4.0, 1.1], 0.08, [0.0, 0.85]);
+    cylinder(&mut p, [4.0, 1.0], 0.18, [0.85, 1.45]);
+    cylinder(&mut p, [4.0, 1.0], 0.1, [1.45, 1.72]);
+    // Lying person at (5, -0.8), along x: the upper half of a body 0.24 m thick, 1.7 m long.
+    grid(&mut p, [4.15, 5.85], [0.0, std::f64::consts::PI], 0.03, |x, a| {
+        [x, -0.8 + 0.2 * a.cos(), 0.12 + 0.12 * a.sin()]
+    });
+    p
+}
+
+fn window(points: &[WindowPoint]) -> DetectWindow<'_> {
+    DetectWindow { stamp: Stamp::new(42, Clock::Ptp), sensor_pose: Isometry3::translation(0.0, 0.0, 0.45), points }
+}
+
+#[test]
+fn finds_the_standing_and_the_lying_person_only() {
+    let points = scene();
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    det.detect(&window(&points), &mut found);
+    let floor = det.last_floor().unwrap();
+    assert!(floor.c.abs() < 0.03 && floor.a.abs() < 0.01, "{floor:?}");
+    let ceiling = floor.ceiling_above_floor_m.unwrap();
+    assert!((ceiling - 2.8).abs() < 0.05, "{ceiling}");
+    let at = |x: f64, y: f64| found.iter().filter(|d| (d.centre_m.x - x).hypot(d.centre_m.y - y) < 0.4).count();
+    assert_eq!(at(4.0, 1.0), 1, "{found:#?}");
+    assert_eq!(at(5.0, -0.8), 1, "{:#?}", det.last_clusters());
+    assert_eq!(found.len(), 2, "nothing else (box, wall): {found:#?}");
+    for d in &found {
+        assert_eq!(d.stamp, Stamp::new(42, Clock::Ptp));
+        assert!(d.score >= 0.5 && d.score <= 1.0);
+        assert!(!d.point_indices.is_empty());
+        // Every point handed out lies in its box and above the floor band.
+        for &i in &d.point_indices {
+            let p = points[i as usize];
+            assert!(d.contains(&p.xyz(), 0.01), "{p:?} outside {d:?}");
+            assert!(p.z_m > 0.05);
+        }
+    }
+    let standing = found.iter().find(|d| at(4.0, 1.0) == 1 && (d.centre_m.x - 4.0).abs() < 0.4).unwrap();
+    assert_eq!(standing.pose, PersonPose::Upright);
+    assert!((standing.size_m.z - 1.72).abs() < 0.1, "{standing:?}");
+    let lying = found.iter().find(|d| (d.centre_m.x - 5.0).abs() < 0.4).unwrap();
+    assert_eq!(lying.pose, PersonPose::Lying);
+    // Its heading is along x (either way round).
+    assert!(lying.yaw_rad.sin().abs() < 0.1 && lying.size_m.x > 1.5, "{lying:?}");
+}
+
+#[test]
+fn the_floor_is_found_wherever_the_map_puts_it() {
+    // The same scene 3 m higher (a map whose origin is below the floor), slightly tilted.
+    let points: Vec<WindowPoint> =
+        scene().into_iter().map(|p| WindowPoint { z_m: p.z_m + 3.0 + 0.01 * p.x_m, ..p }).collect();
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    let w = DetectWindow { sensor_pose: Isometry3::translation(0.0, 0.0, 3.45), ..window(&points) };
+    det.detect(&w, &mut found);
+    let floor = det.last_floor().unwrap();
+    assert!((floor.c - 3.0).abs() < 0.03 && (floor.a - 0.01).abs() < 0.003, "{floor:?}");
+    assert_eq!(found.len(), 2, "{found:#?}");
+}
+
+#[test]
+fn empty_and_garbage_windows_give_nothing_and_do_not_panic() {
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    det.detect(&window(&[]), &mut found);
+    assert!(found.is_empty());
+    let nan = WindowPoint { x_m: f32::NAN, y_m: f32::INFINITY, z_m: f32::NAN, t_ns: 0 };
+    let far = WindowPoint { x_m: 1e30, y_m: -1e30, z_m: 1e30, t_ns: 0 };
+    let points = vec![nan; 100].into_iter().chain(vec![far; 100]).collect::<Vec<_>>();
+    det.detect(&window(&points), &mut found);
+    assert!(found.is_empty());
+}
+
+#[test]
+fn the_shipped_config_loads_and_bad_ones_are_refused() {
+    let shipped = DetectConfig::from_toml(include_str!("../../../config/detect.toml")).unwrap();
+    assert_eq!(shipped, DetectConfig::default(), "config/detect.toml documents the defaults");
+    assert_eq!(DetectConfig::from_toml("").unwrap(), DetectConfig::default());
+    assert!(DetectConfig::from_toml("voxel_size = 0.1").is_err(), "unknown keys are refused");
+    assert!(DetectConfig::from_toml("voxel_m = 0.0").is_err());
+    assert!(DetectConfig::from_toml("upright_height_m = [2.0, 1.0]").is_err());
+    assert!(DetectConfig::from_toml("min_score = 1.5").is_err());
+}
+
+#[test]
+fn to_world_applies_each_points_pose() {
+    let mut out = Vec::new();
+    let pose_at = |t: u64| Isometry3::translation(t as f64, 0.0, 0.0);
+    to_world([([1.0, 2.0, 3.0], 0u64), ([1.0, 2.0, 3.0], 5)], pose_at, &mut out);
+    assert_eq!(out[0].xyz(), Vector3::new(1.0, 2.0, 3.0));
+    assert_eq!(out[1].xyz(), Vector3::new(6.0, 2.0, 3.0));
+    assert_eq!(out[1].t_ns, 5);
+}
+
+fn detection(x: f64, y: f64) -> Detection {
+    Detection {
+        stamp: Stamp::new(0, Clock::Ptp),
+        centre_m: Vector3::new(x, y, 0.9),
+        size_m: Vector3::new(0.5, 0.3, 1.7),
+        yaw_rad: 0.0,
+        score: 1.0,
+        pose: PersonPose::Upright,
+        point_indices: Vec::new(),
+    }
+}
+
+fn person(label: u16, x: f64, y: f64, returns: usize) -> TruthPerson {
+    TruthPerson { label, centre_m: Vector3::new(x, y, 0.9), size_m: Vector3::new(0.3, 0.6, 1.7), yaw_rad: 0.0, returns }
+}
+
+#[test]
+fn matching_counts_hits_duplicates_misses_and_hidden_people() {
+    let rule = MatchRule::default();
+    let truth = [person(1, 0.0, 0.0, 100), person(2, 5.0, 0.0, 100), person(3, 9.0, 0.0, 3)];
+    // A hit, a duplicate of it, a detection of the barely seen person 3, and one on nothing.
+    let dets = [detection(0.1, 0.0), detection(-0.3, 0.1), detection(9.0, 0.2), detection(2.5, 0.0)];
+    let m = match_window(&dets, &truth, &rule);
+    assert_eq!(m.counts.true_positives, 1);
+    assert_eq!(m.counts.false_positives, 2, "the duplicate and the one on nothing");
+    assert_eq!(m.counts.ignored, 1);
+    assert_eq!(m.counts.misses, 1);
+    assert_eq!(m.missed, vec![2]);
+    assert_eq!(m.detection_label, vec![Some(1), None, Some(3), None]);
+    assert!((m.counts.precision() - 1.0 / 3.0).abs() < 1e-12);
+    assert!((m.counts.recall() - 0.5).abs() < 1e-12);
+    // A lying person seen from one end: the centre is off, but inside the grown box.
+    let lying = TruthPerson { size_m: Vector3::new(1.8, 0.6, 0.25), ..person(4, 0.0, 0.0, 100) };
+    let m = match_window(&[detection(0.75, 0.0)], &[lying], &rule);
+    assert_eq!(m.counts.true_positives, 1);
+}
