@@ -47,6 +47,8 @@ enum Command {
     Base(cmd::base::Command),
     /// Register a source cloud against a target cloud (NDT, then point-to-plane ICP).
     Align(cmd::align::Args),
+    /// LiDAR-inertial odometry on a capture: a TUM trajectory, a map and timing per device.
+    Lio(cmd::lio::Args),
 }
 
 fn main() -> ExitCode {
@@ -69,6 +71,7 @@ fn main() -> ExitCode {
         Command::Ptp(c) => cmd::ptp::run(c),
         Command::Base(c) => cmd::base::run(c),
         Command::Align(a) => cmd::align::run(a),
+        Command::Lio(a) => cmd::lio::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

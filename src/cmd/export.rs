@@ -84,7 +84,7 @@ pub enum DeviceKey {
 }
 
 impl DeviceKey {
-    fn of(d: &Datagram) -> Self {
+    pub fn of(d: &Datagram) -> Self {
         match (d.device_index, d.src) {
             (Some(i), _) => Self::Lvx(i),
             (None, Some(src)) => Self::Ip(*src.ip()),
@@ -112,7 +112,7 @@ pub enum DeviceSelector {
 }
 
 impl DeviceSelector {
-    fn matches(self, key: DeviceKey) -> bool {
+    pub fn matches(self, key: DeviceKey) -> bool {
         match (self, key) {
             (Self::Ip(a), DeviceKey::Ip(b)) => a == b,
             (Self::Index(a), DeviceKey::Lvx(b)) => a == b,

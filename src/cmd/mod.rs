@@ -7,6 +7,8 @@ pub mod devices;
 pub mod export;
 pub mod imu;
 pub mod inspect;
+pub mod lio;
+mod lio_input;
 pub mod livox;
 pub mod mock;
 pub mod ptp;

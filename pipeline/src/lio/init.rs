@@ -39,7 +39,13 @@ pub struct StaticInit {
 
 impl StaticInit {
     pub fn new(window_ns: u64) -> Self {
-        Self { window_ns, max_gyro_std_rad_s: 0.02, max_acc_std_m_s2: 0.1, samples: Vec::new(), restarts: 0 }
+        Self::with_limits(window_ns, 0.02, 0.1)
+    }
+
+    /// A window that counts as still while the gyro and accelerometer spreads (standard
+    /// deviations) stay within these.
+    pub fn with_limits(window_ns: u64, max_gyro_std_rad_s: f64, max_acc_std_m_s2: f64) -> Self {
+        Self { window_ns, max_gyro_std_rad_s, max_acc_std_m_s2, samples: Vec::new(), restarts: 0 }
     }
 
     /// Adds one sample; returns the result once a static window is complete.

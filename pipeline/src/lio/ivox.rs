@@ -68,24 +68,23 @@ impl VoxelMap {
         out.clear();
         let (cx, cy, cz) = self.key(q);
         let max2 = max_dist_m * max_dist_m;
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some(v) = self.voxels.get(&(cx + dx, cy + dy, cz + dz)) else { continue };
-                    for p in v {
-                        let d2 = (p - q).norm_squared();
-                        if d2 > max2 {
-                            continue;
-                        }
-                        if out.len() < k {
-                            out.push((d2, *p));
-                            out.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        } else if out.last().is_some_and(|l| d2 < l.0) {
-                            out.pop();
-                            let at = out.partition_point(|e| e.0 < d2);
-                            out.insert(at, (d2, *p));
-                        }
-                    }
+        // The 27 voxels around the query: with the face neighbours only (iVox's NEARBY7) some
+        // scenes lost their nearest planes and drifted (the tactical robot: 1.4 cm -> 32 cm APE).
+        let around = (-1..=1).flat_map(|dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))));
+        for (dx, dy, dz) in around {
+            let Some(v) = self.voxels.get(&(cx + dx, cy + dy, cz + dz)) else { continue };
+            for p in v {
+                let d2 = (p - q).norm_squared();
+                if d2 > max2 {
+                    continue;
+                }
+                if out.len() < k {
+                    let at = out.partition_point(|e| e.0 < d2);
+                    out.insert(at, (d2, *p));
+                } else if out.last().is_some_and(|l| d2 < l.0) {
+                    out.pop();
+                    let at = out.partition_point(|e| e.0 < d2);
+                    out.insert(at, (d2, *p));
                 }
             }
         }

@@ -7,7 +7,9 @@
 //! of IMU must be static ([`InitStatus::MotionDetected`] says when it was not; the window
 //! restarts). The world frame is gravity-aligned (z up) with the IMU's yaw at initialization.
 
+mod config;
 mod deskew;
+mod health;
 mod init;
 mod ivox;
 mod odometry;
@@ -18,6 +20,8 @@ mod state;
 mod types;
 mod update;
 
+pub use config::{ExtrinsicsSection, ImuSection, ImuSource, LioFile, MapSection, ScanSection, UpdateSection};
+pub use health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 pub use init::{InitResult, InitStatus, StaticInit};
 pub use ivox::VoxelMap;
 pub use odometry::{Lio, LioConfig, LioStatus, ScanOutput};

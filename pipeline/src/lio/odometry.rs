@@ -1,6 +1,7 @@
 //! The LIO front to back: static init, IMU propagation, de-skew, iterated update, map growth.
 
 use super::deskew::deskew;
+use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit};
 use super::init::{InitResult, InitStatus, StaticInit};
 use super::ivox::VoxelMap;
 use super::propagate::{step, ImuNoise, Knot};
@@ -17,29 +18,42 @@ pub struct LioConfig {
     pub rot_imu_lidar: Rotation3<f64>,
     pub pos_imu_lidar: Vector3<f64>,
     pub init_window_ns: u64,
+    pub init_max_gyro_std_rad_s: f64,
+    pub init_max_acc_std_m_s2: f64,
     pub noise: ImuNoise,
     pub update: UpdateConfig,
     /// Scan downsampling (voxel centroid) before the update.
     pub scan_voxel_m: f64,
+    /// Points closer than this to the LiDAR are dropped.
+    pub blind_m: f64,
+    /// At most this many scan points (voxel centroids) enter the update; 0: no limit.
+    pub max_points: usize,
     pub map_voxel_m: f64,
     pub map_points_per_voxel: usize,
     pub map_min_spacing_m: f64,
     pub map_radius_m: f64,
+    pub health: HealthConfig,
 }
 
 impl Default for LioConfig {
     fn default() -> Self {
         Self {
+            // The Avia's internal IMU (see config/lio.toml).
             rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
+            pos_imu_lidar: Vector3::new(0.04165, 0.02326, -0.0284),
             init_window_ns: 1_000_000_000,
+            init_max_gyro_std_rad_s: 0.02,
+            init_max_acc_std_m_s2: 0.1,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
+            blind_m: 0.5,
+            max_points: 1000,
             map_voxel_m: 0.5,
             map_points_per_voxel: 20,
             map_min_spacing_m: 0.1,
             map_radius_m: 100.0,
+            health: HealthConfig::default(),
         }
     }
 }
@@ -57,6 +71,12 @@ pub struct ScanOutput {
     /// The LiDAR's pose in the (gravity-aligned) world at the scan's end.
     pub lidar_pose: Isometry3<f64>,
     pub update: UpdateReport,
+    pub health: Health,
+    /// Why the scan was refused (its update not applied, the scan kept out of the map).
+    pub refused: Option<Refusal>,
+    /// 1-sigma uncertainty of the LiDAR's position and yaw after the scan.
+    pub pos_sigma_m: f64,
+    pub yaw_sigma_deg: f64,
     pub points_in: usize,
     pub points_used: usize,
     pub map_points: usize,
@@ -76,6 +96,7 @@ pub struct Lio {
     imu: VecDeque<ImuSample>,
     scans: VecDeque<LioScan>,
     map: VoxelMap,
+    monitor: HealthMonitor,
     scans_done: u64,
     knots: Vec<Knot>,
     deskewed: Vec<Vector3<f64>>,
@@ -95,7 +116,7 @@ impl Lio {
         };
         let map = VoxelMap::new(cfg.map_voxel_m, cfg.map_points_per_voxel, cfg.map_min_spacing_m, cfg.map_radius_m);
         Self {
-            init: StaticInit::new(cfg.init_window_ns),
+            init: StaticInit::with_limits(cfg.init_window_ns, cfg.init_max_gyro_std_rad_s, cfg.init_max_acc_std_m_s2),
             status: LioStatus::Initializing(InitStatus::Collecting),
             state,
             cov: Cov::identity(),
@@ -104,6 +125,7 @@ impl Lio {
             imu: VecDeque::new(),
             scans: VecDeque::new(),
             map,
+            monitor: HealthMonitor::default(),
             scans_done: 0,
             knots: Vec::new(),
             deskewed: Vec::new(),
@@ -199,41 +221,134 @@ impl Lio {
         self.knots.clear();
         self.propagate_to(scan.end_ns);
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
-        let used = voxel_centroids(&self.deskewed, self.cfg.scan_voxel_m);
-        let report = if self.map.is_empty() {
-            UpdateReport::default()
-        } else {
-            update(&mut self.state, &mut self.cov, &used, &self.map, &self.cfg.update)
-        };
-        let (r, t) =
-            (self.state.rot * self.state.rot_imu_lidar, self.state.rot * self.state.pos_imu_lidar + self.state.pos);
-        for p in &used {
-            self.map.insert(r * p + t);
+        let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
+        let mut used =
+            voxel_centroids(self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq), self.cfg.scan_voxel_m);
+        thin_out(&mut used, self.cfg.max_points);
+        let (mut report, mut verdict) = (UpdateReport::default(), None);
+        if !self.map.is_empty() {
+            if self.monitor.is_lost() {
+                self.widen_uncertainty();
+            }
+            let (prior, prior_cov) = (self.state.clone(), self.cov);
+            let mut cfg = self.cfg.update;
+            cfg.min_direction_info = self.cfg.health.min_direction_info;
+            if self.monitor.is_lost() {
+                cfg.max_neighbour_dist_m *= 3.0;
+                cfg.max_iterations *= 3;
+            }
+            report = update(&mut self.state, &mut self.cov, &used, &self.map, &cfg);
+            let moved = prior.lidar_pose().inverse() * self.state.lidar_pose();
+            let fit = ScanFit {
+                matched: report.matched,
+                rms_m: report.rms_m,
+                correction_m: moved.translation.vector.norm(),
+                correction_deg: moved.rotation.angle().to_degrees(),
+                weak_directions: report.weak_directions,
+            };
+            let v = self.monitor.judge(&self.cfg.health, scan.end_ns, &fit);
+            if v.refused.is_some() {
+                self.state = prior;
+                self.cov = prior_cov;
+            }
+            verdict = Some(v);
+        }
+        let refused = verdict.and_then(|v| v.refused);
+        // A lost filter whose map is too thin to match grows the map from the IMU's pose;
+        // otherwise it would never have anything to find itself in.
+        let grow_anyway = refused == Some(Refusal::TooFewMatches) && self.monitor.is_lost();
+        if refused.is_none() || grow_anyway {
+            let (r, t) =
+                (self.state.rot * self.state.rot_imu_lidar, self.state.rot * self.state.pos_imu_lidar + self.state.pos);
+            for p in &used {
+                self.map.insert(r * p + t);
+            }
         }
         self.scans_done += 1;
         if self.scans_done.is_multiple_of(10) {
             self.map.trim(&self.state.pos);
         }
+        let pos_var = (0..3).map(|i| self.cov[(POS + i, POS + i)]).sum::<f64>();
+        let yaw_var = {
+            // Attitude error is in the IMU frame; world yaw is its projection on world z.
+            let z = self.state.rot.inverse() * Vector3::z();
+            let c = self.cov.fixed_view::<3, 3>(ROT, ROT);
+            (z.transpose() * c * z)[(0, 0)]
+        };
         ScanOutput {
             end_ns: scan.end_ns,
             lidar_pose: self.state.lidar_pose(),
             update: report,
+            health: verdict.map_or(Health::Tracking, |v| v.health),
+            refused,
+            pos_sigma_m: pos_var.max(0.0).sqrt(),
+            yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),
             points_in: scan.points.len(),
             points_used: used.len(),
             map_points: self.map.len(),
             elapsed_us: started.elapsed().as_micros() as u64,
         }
     }
+
+    /// A lost filter no longer trusts its position, velocity or heading much: widen them so the
+    /// next update may move the state as far as the map says.
+    fn widen_uncertainty(&mut self) {
+        for (at, var) in [(POS, 0.25), (VEL, 0.25), (ROT, 1e-3)] {
+            for i in at..at + 3 {
+                self.cov[(i, i)] = self.cov[(i, i)].max(var);
+            }
+        }
+    }
+
+    /// Refused scans and times lost so far.
+    pub fn health_counts(&self) -> (u64, u64) {
+        (self.monitor.scans_refused, self.monitor.times_lost)
+    }
 }
 
-/// One centroid per occupied voxel.
-fn voxel_centroids(points: &[Vector3<f64>], voxel_m: f64) -> Vec<Vector3<f64>> {
-    let mut cells: HashMap<(i32, i32, i32), (Vector3<f64>, u32)> = HashMap::with_capacity(points.len() / 4);
+/// One centroid per occupied voxel, in voxel order (so runs repeat exactly).
+fn voxel_centroids<'a>(points: impl Iterator<Item = &'a Vector3<f64>>, voxel_m: f64) -> Vec<Vector3<f64>> {
+    let mut cells: HashMap<(i32, i32, i32), (Vector3<f64>, u32)> = HashMap::with_capacity(4096);
     for p in points {
         let k = ((p.x / voxel_m).floor() as i32, (p.y / voxel_m).floor() as i32, (p.z / voxel_m).floor() as i32);
         let e = cells.entry(k).or_insert((Vector3::zeros(), 0));
         e.0 += p;
         e.1 += 1;
     }
-    cells.into_values().map(|(s, n)| s / f64::from(n)).collect()
+    let mut cells: Vec<_> = cells.into_iter().collect();
+    cells.sort_unstable_by_key(|(k, _)| *k);
+    cells.into_iter().map(|(_, (s, n))| s / f64::from(n)).collect()
+}
+
+/// Keeps at most `max` points, evenly strided through the (voxel-ordered) list; 0 keeps all.
+fn thin_out(points: &mut Vec<Vector3<f64>>, max: usize) {
+    if max == 0 || points.len() <= max {
+        return;
+    }
+    let n = points.len();
+    let kept: Vec<_> = (0..max).filter_map(|i| points.get(i * n / max).copied()).collect();
+    *points = kept;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_an_even_spread() {
+        let mut pts: Vec<Vector3<f64>> = (0..10).map(|i| Vector3::new(f64::from(i), 0.0, 0.0)).collect();
+        thin_out(&mut pts, 4);
+        let xs: Vec<f64> = pts.iter().map(|p| p.x).collect();
+        assert_eq!(xs, [0.0, 2.0, 5.0, 7.0]);
+        thin_out(&mut pts, 0);
+        assert_eq!(pts.len(), 4);
+    }
+
+    #[test]
+    fn centroids_come_out_in_voxel_order() {
+        let pts = [Vector3::new(1.2, 0.0, 0.0), Vector3::new(-0.7, 0.0, 0.0), Vector3::new(1.4, 0.0, 0.0)];
+        let c = voxel_centroids(pts.iter(), 0.5);
+        assert_eq!(c.len(), 2);
+        assert!((c[0].x + 0.7).abs() < 1e-12 && (c[1].x - 1.3).abs() < 1e-12, "{c:?}");
+    }
 }

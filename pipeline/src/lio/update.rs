@@ -12,7 +12,7 @@
 //! constrain some direction (a corridor's axis, an open field's yaw).
 
 use super::ivox::VoxelMap;
-use super::plane;
+use super::plane::{self, Plane};
 use super::state::{Cov, ErrVec, State, DIM};
 use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
 
@@ -27,6 +27,12 @@ pub struct UpdateConfig {
     /// Converged when the step is below these.
     pub converge_rot_rad: f64,
     pub converge_pos_m: f64,
+    /// Eigen-directions of the normalised information below this take no update (see the
+    /// module's notes); 0 applies every direction, as FAST-LIO2 does.
+    pub min_direction_info: f64,
+    /// Neighbours are searched again after a step larger than these (else the planes are kept).
+    pub research_rot_rad: f64,
+    pub research_pos_m: f64,
 }
 
 impl Default for UpdateConfig {
@@ -34,11 +40,14 @@ impl Default for UpdateConfig {
         Self {
             max_iterations: 4,
             residual_var_m2: 0.001,
-            neighbours: 5,
+            neighbours: 8,
             max_neighbour_dist_m: 1.5,
-            max_plane_dev_m: 0.1,
+            max_plane_dev_m: 0.05,
             converge_rot_rad: 1e-3,
             converge_pos_m: 1e-3,
+            min_direction_info: 0.005,
+            research_rot_rad: 0.01,
+            research_pos_m: 0.05,
         }
     }
 }
@@ -52,6 +61,8 @@ pub struct UpdateReport {
     pub degeneracy_index: f64,
     /// RMS of the accepted residuals in the last iteration (m).
     pub rms_m: f64,
+    /// Directions of the pose that took no update in the last iteration (0 to 6).
+    pub weak_directions: usize,
 }
 
 /// Runs the update. Leaves state and covariance unchanged (and reports 0 matched) when too few
@@ -70,20 +81,32 @@ pub fn update(
     let mut nn = Vec::with_capacity(cfg.neighbours);
     let mut nbrs: Vec<Vector3<f64>> = Vec::with_capacity(cfg.neighbours);
     let mut posterior = *cov;
+    // Each point's plane; searched again only after a step large enough to change neighbours
+    // (the search is most of an iteration's cost).
+    let mut planes: Vec<Option<Plane>> = Vec::with_capacity(points.len());
+    let mut search = true;
     for it in 0..cfg.max_iterations {
         let (mut hth, mut htz) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
         let (mut n_used, mut sum_sq, mut sum_range) = (0usize, 0.0, 0.0);
         let mut scaled = Matrix6::<f64>::zeros();
-        for p in points {
+        if search {
+            planes.clear();
+        }
+        for (i, p) in points.iter().enumerate() {
             let q = x.rot_imu_lidar * p + x.pos_imu_lidar;
             let w = x.rot * q + x.pos;
-            map.nearest(&w, cfg.neighbours, cfg.max_neighbour_dist_m, &mut nn);
-            if nn.len() < cfg.neighbours {
-                continue;
+            if search {
+                map.nearest(&w, cfg.neighbours, cfg.max_neighbour_dist_m, &mut nn);
+                let plane = if nn.len() < cfg.neighbours {
+                    None
+                } else {
+                    nbrs.clear();
+                    nbrs.extend(nn.iter().map(|(_, v)| *v));
+                    plane::fit(&nbrs, cfg.max_plane_dev_m)
+                };
+                planes.push(plane);
             }
-            nbrs.clear();
-            nbrs.extend(nn.iter().map(|(_, v)| *v));
-            let Some(pl) = plane::fit(&nbrs, cfg.max_plane_dev_m) else { continue };
+            let Some(pl) = planes.get(i).copied().flatten() else { continue };
             let r = pl.normal.dot(&w) + pl.offset;
             // FAST-LIO's gate: farther points may sit farther from their plane.
             if r.abs() * 9.0 > p.norm().sqrt() {
@@ -107,8 +130,25 @@ pub fn update(
         let mut s = Vector6::repeat(1.0);
         s.fixed_rows_mut::<3>(0).fill(1.0 / l);
         scaled.copy_from(&(Matrix6::from_diagonal(&s) * hth * Matrix6::from_diagonal(&s) / n_used as f64));
-        report.degeneracy_index = SymmetricEigen::new(scaled).eigenvalues.min();
+        let eigen = SymmetricEigen::new(scaled);
+        report.degeneracy_index = eigen.eigenvalues.min();
         report.rms_m = (sum_sq / n_used as f64).sqrt();
+        report.weak_directions = eigen.eigenvalues.iter().filter(|&&l| l < cfg.min_direction_info).count();
+        if report.weak_directions > 0 {
+            // Keep only the information along well-constrained directions (projected in the
+            // unit-free coordinates where the eigenvalues were taken, then scaled back).
+            let mut keep = Matrix6::<f64>::zeros();
+            for (i, l) in eigen.eigenvalues.iter().enumerate() {
+                if *l >= cfg.min_direction_info {
+                    let v = eigen.eigenvectors.column(i);
+                    keep += v * v.transpose();
+                }
+            }
+            let s_inv = Matrix6::from_diagonal(&s.map(|v| 1.0 / v));
+            let to = s_inv * keep * Matrix6::from_diagonal(&s);
+            hth = to * hth * to.transpose();
+            htz = to * htz;
+        }
 
         let mut info = p_inv;
         let mut ff = info.fixed_view_mut::<6, 6>(0, 0);
@@ -123,6 +163,7 @@ pub fn update(
         posterior = info_inv;
         let rot_step = dx.fixed_rows::<3>(0).norm();
         let pos_step = dx.fixed_rows::<3>(3).norm();
+        search = rot_step > cfg.research_rot_rad || pos_step > cfg.research_pos_m;
         if rot_step < cfg.converge_rot_rad && pos_step < cfg.converge_pos_m {
             report.converged = true;
             break;
@@ -132,4 +173,46 @@ pub fn update(
     *state = x;
     *cov = (posterior + posterior.transpose()) * 0.5;
     report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    fn state_at(pos: Vector3<f64>) -> State {
+        State {
+            rot: Rotation3::identity(),
+            pos,
+            vel: Vector3::zeros(),
+            bias_gyro: Vector3::zeros(),
+            bias_acc: Vector3::zeros(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            rot_imu_lidar: Rotation3::identity(),
+            pos_imu_lidar: Vector3::zeros(),
+        }
+    }
+
+    /// A floor alone pins height, roll and pitch; x, y and yaw are left to the IMU.
+    #[test]
+    fn a_floor_alone_corrects_height_and_leaves_the_unseen_directions() {
+        let mut map = VoxelMap::new(0.5, 20, 0.05, 100.0);
+        for i in -40..=40 {
+            for j in -40..=40 {
+                map.insert(Vector3::new(f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
+            }
+        }
+        // The sensor 1 m up, believed 1.1 m up and 0.2 m off in x.
+        let points: Vec<Vector3<f64>> = (-8..=8)
+            .flat_map(|i| (-8..=8).map(move |j| Vector3::new(f64::from(i) * 0.2, f64::from(j) * 0.2, -1.0)))
+            .collect();
+        let mut state = state_at(Vector3::new(0.2, 0.0, 1.1));
+        let mut cov = Cov::identity() * 1e-2;
+        let report = update(&mut state, &mut cov, &points, &map, &UpdateConfig::default());
+        assert!(report.converged && report.matched > 200, "{report:?}");
+        assert!(report.weak_directions >= 3, "{report:?}");
+        assert!(report.degeneracy_index < 1e-6, "{report:?}");
+        assert!((state.pos.z - 1.0).abs() < 0.01, "height corrected: {}", state.pos.z);
+        assert!((state.pos.x - 0.2).abs() < 1e-6 && state.pos.y.abs() < 1e-6, "x, y kept: {:?}", state.pos);
+    }
 }

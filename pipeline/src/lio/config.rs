@@ -1,0 +1,246 @@
+//! The LIO's settings as a TOML file (`config/lio.toml`): every key optional, unknown keys refused.
+//! [`LioFile::to_config`] turns them into the [`LioConfig`] the filter runs with.
+
+use super::health::HealthConfig;
+use super::odometry::LioConfig;
+use super::propagate::ImuNoise;
+use super::update::UpdateConfig;
+use crate::PipelineError;
+use nalgebra::{Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LioFile {
+    pub imu: ImuSection,
+    pub extrinsics: ExtrinsicsSection,
+    pub scan: ScanSection,
+    pub update: UpdateSection,
+    pub map: MapSection,
+    pub health: HealthConfig,
+}
+
+/// Which IMU drives the filter and how its samples reach the LiDAR's clock.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuSection {
+    /// `internal`: the Avia's own IMU packets; `external`: a serial IMU given to `starc lio --imu`.
+    pub source: ImuSource,
+    /// Added to every IMU time stamp to put it on the LiDAR's clock (an external IMU's latency).
+    pub time_offset_ns: i64,
+    /// Length of the still window that initialization needs.
+    pub init_window_s: f64,
+    /// Largest gyro and accelerometer spread (standard deviation) a still window may show.
+    pub init_max_gyro_std_rad_s: f64,
+    pub init_max_acc_std_m_s2: f64,
+    /// Continuous-time noise densities (per sqrt(s)).
+    pub gyro_noise_rad_s: f64,
+    pub acc_noise_m_s2: f64,
+    pub gyro_bias_walk: f64,
+    pub acc_bias_walk: f64,
+}
+
+impl Default for ImuSection {
+    fn default() -> Self {
+        let noise = ImuNoise::default();
+        Self {
+            source: ImuSource::Internal,
+            time_offset_ns: 0,
+            init_window_s: 1.0,
+            init_max_gyro_std_rad_s: 0.02,
+            init_max_acc_std_m_s2: 0.1,
+            gyro_noise_rad_s: noise.gyro_rad_s,
+            acc_noise_m_s2: noise.acc_m_s2,
+            gyro_bias_walk: noise.gyro_bias_walk,
+            acc_bias_walk: noise.acc_bias_walk,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImuSource {
+    Internal,
+    External,
+}
+
+/// `T_imu_lidar`: where the LiDAR sits in the IMU's frame (maps LiDAR points into the IMU frame).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExtrinsicsSection {
+    pub translation_m: [f64; 3],
+    /// Roll, pitch, yaw (fixed axes x, then y, then z), degrees.
+    pub rotation_rpy_deg: [f64; 3],
+}
+
+impl Default for ExtrinsicsSection {
+    /// The Avia's internal IMU: axes aligned with the LiDAR, the LiDAR's origin at
+    /// (0.04165, 0.02326, -0.0284) m in the IMU frame (Livox's published offset).
+    fn default() -> Self {
+        Self { translation_m: [0.04165, 0.02326, -0.0284], rotation_rpy_deg: [0.0; 3] }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanSection {
+    /// Scan period: points are grouped into scans of this length.
+    pub period_ms: f64,
+    /// Points closer than this are dropped (the platform itself, the Avia's 1 m blind zone).
+    pub blind_m: f64,
+    /// Voxel size the de-skewed scan is reduced to (one centroid per voxel) before the update.
+    pub voxel_m: f64,
+    /// At most this many of those centroids enter the update (evenly spread); 0: all.
+    pub max_points: usize,
+}
+
+impl Default for ScanSection {
+    fn default() -> Self {
+        let c = LioConfig::default();
+        Self { period_ms: 100.0, blind_m: c.blind_m, voxel_m: c.scan_voxel_m, max_points: c.max_points }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UpdateSection {
+    pub max_iterations: usize,
+    /// Variance of one point-to-plane residual (m^2).
+    pub residual_var_m2: f64,
+    /// Map points a plane is fitted to, and how far they may be.
+    pub neighbours: usize,
+    pub max_neighbour_dist_m: f64,
+    /// Largest distance of a neighbour from its fitted plane.
+    pub max_plane_dev_m: f64,
+}
+
+impl Default for UpdateSection {
+    fn default() -> Self {
+        let u = UpdateConfig::default();
+        Self {
+            max_iterations: u.max_iterations,
+            residual_var_m2: u.residual_var_m2,
+            neighbours: u.neighbours,
+            max_neighbour_dist_m: u.max_neighbour_dist_m,
+            max_plane_dev_m: u.max_plane_dev_m,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapSection {
+    pub voxel_m: f64,
+    pub points_per_voxel: usize,
+    /// A new point closer than this to one already in its voxel is not added.
+    pub min_spacing_m: f64,
+    /// Voxels farther than this from the sensor are dropped.
+    pub radius_m: f64,
+}
+
+impl Default for MapSection {
+    fn default() -> Self {
+        let c = LioConfig::default();
+        Self {
+            voxel_m: c.map_voxel_m,
+            points_per_voxel: c.map_points_per_voxel,
+            min_spacing_m: c.map_min_spacing_m,
+            radius_m: c.map_radius_m,
+        }
+    }
+}
+
+impl LioFile {
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let file: Self =
+            toml::from_str(text).map_err(|e| PipelineError::BadFile { format: "LIO config", reason: e.to_string() })?;
+        file.to_config()?;
+        Ok(file)
+    }
+
+    /// The filter's settings; refuses values it cannot run with.
+    pub fn to_config(&self) -> Result<LioConfig, PipelineError> {
+        let bad = |reason: String| PipelineError::BadFile { format: "LIO config", reason };
+        let positive = [
+            ("imu.init_window_s", self.imu.init_window_s),
+            ("scan.period_ms", self.scan.period_ms),
+            ("scan.voxel_m", self.scan.voxel_m),
+            ("update.residual_var_m2", self.update.residual_var_m2),
+            ("update.max_neighbour_dist_m", self.update.max_neighbour_dist_m),
+            ("map.voxel_m", self.map.voxel_m),
+            ("map.radius_m", self.map.radius_m),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(format!("{name} must be a positive number, not {v}")));
+            }
+        }
+        if self.update.neighbours < 3 || self.update.max_iterations == 0 || self.map.points_per_voxel == 0 {
+            return Err(bad("update.neighbours must be at least 3, update.max_iterations and \
+                 map.points_per_voxel at least 1"
+                .into()));
+        }
+        self.health.validate().map_err(bad)?;
+        let [r, p, y] = self.extrinsics.rotation_rpy_deg.map(f64::to_radians);
+        let noise = ImuNoise {
+            gyro_rad_s: self.imu.gyro_noise_rad_s,
+            acc_m_s2: self.imu.acc_noise_m_s2,
+            gyro_bias_walk: self.imu.gyro_bias_walk,
+            acc_bias_walk: self.imu.acc_bias_walk,
+        };
+        let defaults = UpdateConfig::default();
+        Ok(LioConfig {
+            rot_imu_lidar: Rotation3::from_euler_angles(r, p, y),
+            pos_imu_lidar: Vector3::from(self.extrinsics.translation_m),
+            init_window_ns: (self.imu.init_window_s * 1e9) as u64,
+            init_max_gyro_std_rad_s: self.imu.init_max_gyro_std_rad_s,
+            init_max_acc_std_m_s2: self.imu.init_max_acc_std_m_s2,
+            noise,
+            update: UpdateConfig {
+                max_iterations: self.update.max_iterations,
+                residual_var_m2: self.update.residual_var_m2,
+                neighbours: self.update.neighbours,
+                max_neighbour_dist_m: self.update.max_neighbour_dist_m,
+                max_plane_dev_m: self.update.max_plane_dev_m,
+                ..defaults
+            },
+            scan_voxel_m: self.scan.voxel_m,
+            blind_m: self.scan.blind_m,
+            max_points: self.scan.max_points,
+            map_voxel_m: self.map.voxel_m,
+            map_points_per_voxel: self.map.points_per_voxel,
+            map_min_spacing_m: self.map.min_spacing_m,
+            map_radius_m: self.map.radius_m,
+            health: self.health.clone(),
+        })
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_is_the_defaults() {
+        let text = include_str!("../../../config/lio.toml");
+        let file = LioFile::from_toml(text).unwrap();
+        assert_eq!(file, LioFile::default());
+        assert_eq!(file.to_config().unwrap(), LioConfig::default());
+    }
+
+    #[test]
+    fn external_example_loads() {
+        let text = include_str!("../../../config/lio_external_imu.toml");
+        let file = LioFile::from_toml(text).unwrap();
+        assert_eq!(file.imu.source, ImuSource::External);
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused() {
+        assert!(LioFile::from_toml("[map]\nvoxel = 0.5\n").is_err());
+        let e = LioFile::from_toml("[scan]\nvoxel_m = -1.0\n").unwrap_err().to_string();
+        assert!(e.contains("scan.voxel_m"), "{e}");
+        assert!(LioFile::from_toml("[imu]\nsource = \"gps\"\n").is_err());
+    }
+}

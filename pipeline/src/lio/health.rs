@@ -1,0 +1,200 @@
+//! The LIO's health: which scans may correct the state, when the IMU alone carries it, and when
+//! the filter counts itself lost and widens its search to find the map again.
+//!
+//! FAST-LIO2 applies every update it computes; in a long corridor or after a scan of sky, the
+//! update pulls the state along directions the scan does not see, and the map that follows is
+//! built from that wrong pose. Here a scan's update is judged first: too few plane matches, a
+//! large residual, or a correction far beyond what the IMU's prediction allows, and the scan is
+//! refused (the state keeps the IMU's prediction and the scan stays out of the map). Directions
+//! the scan does not constrain never take an update at all (see `update.rs`).
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HealthConfig {
+    /// A scan with fewer plane matches than this cannot correct the state.
+    pub min_matched: usize,
+    /// Eigen-directions of the update's normalised information (the degeneracy index's
+    /// eigenvalues, between 0 and 1/3) below this take no update: the IMU carries them.
+    pub min_direction_info: f64,
+    /// RMS point-to-plane residual above which a scan is refused.
+    pub max_rms_m: f64,
+    /// A correction of the IMU's prediction larger than this (per scan) is refused.
+    pub max_correction_m: f64,
+    pub max_correction_deg: f64,
+    /// After refusing scans for this long the filter is lost: the next scans are matched with a
+    /// wider search and an inflated covariance until one is accepted.
+    pub max_ride_s: f64,
+}
+
+impl Default for HealthConfig {
+    fn default() -> Self {
+        Self {
+            min_matched: 30,
+            min_direction_info: 0.005,
+            max_rms_m: 0.15,
+            max_correction_m: 0.3,
+            max_correction_deg: 5.0,
+            max_ride_s: 1.0,
+        }
+    }
+}
+
+impl HealthConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        let finite = [
+            ("health.min_direction_info", self.min_direction_info),
+            ("health.max_rms_m", self.max_rms_m),
+            ("health.max_correction_m", self.max_correction_m),
+            ("health.max_correction_deg", self.max_correction_deg),
+            ("health.max_ride_s", self.max_ride_s),
+        ];
+        for (name, v) in finite {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be a number >= 0, not {v}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How the filter stands after a scan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Health {
+    /// The scan corrected every direction of the pose.
+    Tracking,
+    /// The scan corrected the state, but some directions took no update (see
+    /// [`crate::lio::UpdateReport::weak_directions`]).
+    Degenerate,
+    /// The scan was refused; the IMU carries the state.
+    ImuOnly,
+    /// Scans have been refused for longer than `max_ride_s`.
+    Lost,
+}
+
+impl Health {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tracking => "tracking",
+            Self::Degenerate => "degenerate",
+            Self::ImuOnly => "imu_only",
+            Self::Lost => "lost",
+        }
+    }
+}
+
+/// Why a scan was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Refusal {
+    TooFewMatches,
+    LargeResidual,
+    LargeCorrection,
+}
+
+impl Refusal {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::TooFewMatches => "too_few_matches",
+            Self::LargeResidual => "large_residual",
+            Self::LargeCorrection => "large_correction",
+        }
+    }
+}
+
+/// The verdict on one scan's update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Verdict {
+    pub health: Health,
+    pub refused: Option<Refusal>,
+}
+
+/// What one scan's update did: plane matches and their RMS, the correction it applied to the
+/// IMU's prediction, and the directions it left to the IMU.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScanFit {
+    pub matched: usize,
+    pub rms_m: f64,
+    pub correction_m: f64,
+    pub correction_deg: f64,
+    pub weak_directions: usize,
+}
+
+/// Remembers since when scans are refused.
+#[derive(Clone, Debug, Default)]
+pub struct HealthMonitor {
+    refusing_since_ns: Option<u64>,
+    lost: bool,
+    pub scans_refused: u64,
+    pub times_lost: u64,
+}
+
+impl HealthMonitor {
+    /// Whether the next update should search wider (the filter is lost).
+    pub fn is_lost(&self) -> bool {
+        self.lost
+    }
+
+    /// Judges one scan's update.
+    pub fn judge(&mut self, cfg: &HealthConfig, end_ns: u64, fit: &ScanFit) -> Verdict {
+        // A lost filter expects a large correction: that is what finding the map again looks like.
+        let refused = if fit.matched < cfg.min_matched {
+            Some(Refusal::TooFewMatches)
+        } else if fit.rms_m > cfg.max_rms_m {
+            Some(Refusal::LargeResidual)
+        } else if !self.lost && (fit.correction_m > cfg.max_correction_m || fit.correction_deg > cfg.max_correction_deg)
+        {
+            Some(Refusal::LargeCorrection)
+        } else {
+            None
+        };
+        if refused.is_some() {
+            self.scans_refused += 1;
+            let since = *self.refusing_since_ns.get_or_insert(end_ns);
+            if !self.lost && end_ns.saturating_sub(since) as f64 * 1e-9 >= cfg.max_ride_s {
+                self.lost = true;
+                self.times_lost += 1;
+            }
+            let health = if self.lost { Health::Lost } else { Health::ImuOnly };
+            return Verdict { health, refused };
+        }
+        self.refusing_since_ns = None;
+        self.lost = false;
+        let health = if fit.weak_directions > 0 { Health::Degenerate } else { Health::Tracking };
+        Verdict { health, refused: None }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refusals_turn_into_lost_after_the_ride_time_and_a_good_scan_clears_it() {
+        let cfg = HealthConfig::default();
+        let mut m = HealthMonitor::default();
+        let fit = |matched, rms_m, correction_m, correction_deg, weak_directions| ScanFit {
+            matched,
+            rms_m,
+            correction_m,
+            correction_deg,
+            weak_directions,
+        };
+        let good = |m: &mut HealthMonitor, t: u64| m.judge(&cfg, t, &fit(500, 0.02, 0.01, 0.1, 0));
+        assert_eq!(good(&mut m, 0).health, Health::Tracking);
+        let v = m.judge(&cfg, 100_000_000, &fit(5, 0.02, 0.0, 0.0, 0));
+        assert_eq!((v.health, v.refused), (Health::ImuOnly, Some(Refusal::TooFewMatches)));
+        let v = m.judge(&cfg, 600_000_000, &fit(500, 0.02, 1.0, 0.0, 0));
+        assert_eq!((v.health, v.refused), (Health::ImuOnly, Some(Refusal::LargeCorrection)));
+        let v = m.judge(&cfg, 1_100_000_000, &fit(500, 0.5, 0.0, 0.0, 0));
+        assert_eq!((v.health, v.refused), (Health::Lost, Some(Refusal::LargeResidual)));
+        assert!(m.is_lost());
+        // Lost: a large correction is how the map is found again.
+        let v = m.judge(&cfg, 1_200_000_000, &fit(500, 0.03, 1.0, 3.0, 2));
+        assert_eq!((v.health, v.refused), (Health::Degenerate, None));
+        assert!(!m.is_lost());
+        assert_eq!((m.scans_refused, m.times_lost), (3, 1));
+    }
+}
