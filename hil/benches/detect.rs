@@ -159,7 +159,7 @@ fn features_csv(name: &str, run: &detect_sim::SimRun, cfg: &DetectConfig, path: 
             let person = idx.iter().filter(|&&i| labels[i as usize] != 0).count();
             writeln!(
                 out,
-                "{name},{:.1},{:.3},{:.2},{:.2},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.3}",
+                "{name},{:.1},{:.3},{:.2},{:.2},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.3},{:.3}",
                 (end - 1_767_225_600_000_000_000) as f64 * 1e-9,
                 person as f64 / idx.len().max(1) as f64,
                 f.centre.x,
@@ -176,7 +176,8 @@ fn features_csv(name: &str, run: &detect_sim::SimRun, cfg: &DetectConfig, path: 
                 f.planarity,
                 f.thickness_m,
                 f.range_m,
-                s
+                s,
+                f.top_share
             )
             .unwrap();
         }

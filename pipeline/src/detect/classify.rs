@@ -14,33 +14,55 @@ fn band(x: f64, lo: f64, hi: f64, soft: f64) -> f64 {
     }
 }
 
+/// Clusters with fewer points are judged by their face share more leniently.
+const FACE_MIN_POINTS: usize = 150;
+
+/// Shoulders, hips or a pair of legs are at least this long over the floor (a pole, a door
+/// jamb or the corner of a box is not).
+const MIN_LENGTH_M: f64 = 0.2;
+
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
     // Boxes and slabs: standing or sitting people are thicker than a face and not boxy. (A
-    // lying body is low and round: most of its points are near its box's faces anyway.)
-    let thick =
-        band(f.thickness_m, cfg.min_thickness_m, f64::MAX, 0.005) * band(f.face_share, 0.0, cfg.max_face_share, 0.1);
+    // lying body is low and round: most of its points are near its box's faces anyway.) With
+    // few points (far away, a sliver through a gap) most of them are near some face anyway, so
+    // only nearly all of them on faces counts against it.
+    let max_face = if f.points >= FACE_MIN_POINTS { cfg.max_face_share } else { (cfg.max_face_share + 0.25).min(0.9) };
+    let boxy = band(f.face_share, 0.0, max_face, 0.1);
+    let thick = band(f.thickness_m, cfg.min_thickness_m, f64::MAX, 0.005) * boxy;
+    // Whole bodies are not flat; head and shoulders alone can be (and are judged without it).
+    let not_flat = band(f.planarity, 0.0, cfg.max_planarity, 0.05);
     let upright = thick
+        * not_flat
         * band(height, cfg.upright_height_m[0], cfg.upright_height_m[1], 0.15)
-        * band(length, 0.0, cfg.upright_max_length_m, 0.15)
-        * band(width, 0.1, 0.9, 0.1)
+        * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
+        * band(width, 0.1, 0.9, 0.03)
         // Feet near the floor or a stage, never a body hanging in the air.
         * band(f.bottom_m, f64::MIN, 0.5_f64.max(cfg.max_bottom_m - 0.4), 0.2);
     let low = thick
+        * not_flat
         * band(height, cfg.low_height_m[0], cfg.low_height_m[1], 0.1)
-        * band(length, 0.15, cfg.upright_max_length_m, 0.15)
-        * band(width, 0.1, 0.9, 0.1)
+        * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
+        * band(width, 0.1, 0.9, 0.03)
         * band(f.bottom_m, f64::MIN, cfg.max_bottom_m, 0.2);
-    let lying = band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], 0.05)
+    // Head and shoulders above a table, a seat back or a stage edge: nothing else floats.
+    let upper = thick
+        * band(height, cfg.upper_body_height_m[0], cfg.upper_body_height_m[1], 0.05)
+        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
+        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+        * band(length, MIN_LENGTH_M, 0.8, 0.1)
+        * band(width, 0.1, 0.7, 0.03);
+    let lying = not_flat
+        * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], 0.05)
         * band(length, cfg.lying_length_m[0], cfg.lying_length_m[1], 0.15)
         * band(width, 0.15, cfg.lying_max_width_m, 0.1)
         * band(f.bottom_m, f64::MIN, 0.3, 0.1);
-    let (pose, shape) = [(PersonPose::Upright, upright), (PersonPose::Low, low), (PersonPose::Lying, lying)]
-        .into_iter()
-        .fold((PersonPose::Upright, 0.0), |best, c| if c.1 > best.1 { c } else { best });
-    let common = band(f.planarity, 0.0, cfg.max_planarity, 0.05)
-        * band(f.points as f64, cfg.min_points as f64, f64::MAX, cfg.min_points as f64);
+    let (pose, shape) =
+        [(PersonPose::Upright, upright), (PersonPose::Low, low), (PersonPose::Low, upper), (PersonPose::Lying, lying)]
+            .into_iter()
+            .fold((PersonPose::Upright, 0.0), |best, c| if c.1 > best.1 { c } else { best });
+    let common = band(f.points as f64, cfg.min_points as f64, f64::MAX, cfg.min_points as f64);
     (pose, shape * common)
 }
 

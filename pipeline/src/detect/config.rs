@@ -40,6 +40,11 @@ pub struct DetectConfig {
     pub low_height_m: [f64; 2],
     /// People lying on the floor: vertical extent.
     pub lying_height_m: [f64; 2],
+    /// Head and shoulders seen above furniture or a stage edge (the rest hidden): vertical
+    /// extent, and the range of their top above the floor.
+    pub upper_body_height_m: [f64; 2],
+    pub upper_body_top_m: [f64; 2],
+
     /// Longest horizontal side of an upright or low person's box.
     pub upright_max_length_m: f64,
     /// Horizontal sides of a lying person's box: length range and largest width.
@@ -73,15 +78,17 @@ impl Default for DetectConfig {
             ceiling_band_m: 0.15,
             voxel_m: 0.1,
             min_points: 25,
-            plane_min_length_m: 0.9,
+            plane_min_length_m: 0.8,
             plane_min_width_m: 0.45,
             plane_tolerance_m: 0.05,
             max_planes: 4,
             upright_height_m: [1.2, 2.1],
             low_height_m: [0.55, 1.35],
             lying_height_m: [0.1, 0.5],
+            upper_body_height_m: [0.25, 1.2],
+            upper_body_top_m: [0.9, 2.6],
             upright_max_length_m: 1.1,
-            lying_length_m: [0.7, 2.2],
+            lying_length_m: [1.0, 2.2],
             lying_max_width_m: 0.8,
             max_bottom_m: 1.2,
             face_tolerance_m: 0.04,
@@ -122,7 +129,14 @@ impl DetectConfig {
         if self.voxel_m < 0.02 {
             return Err(bad("voxel_m below 0.02 m would make the voxel grid explode"));
         }
-        let ranges = [self.upright_height_m, self.low_height_m, self.lying_height_m, self.lying_length_m];
+        let ranges = [
+            self.upright_height_m,
+            self.low_height_m,
+            self.lying_height_m,
+            self.lying_length_m,
+            self.upper_body_height_m,
+            self.upper_body_top_m,
+        ];
         if ranges.iter().any(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && *lo >= 0.0 && lo < hi)) {
             return Err(bad("every [min, max] range needs 0 <= min < max"));
         }

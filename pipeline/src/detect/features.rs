@@ -20,6 +20,8 @@ pub struct ClusterFeatures {
     pub top_m: f64,
     /// Share of the points within the face tolerance of a side or the top of the box.
     pub face_share: f64,
+    /// Share of the points within the face tolerance of the top alone (a box's flat top).
+    pub top_share: f64,
     /// From the eigenvalues l1 >= l2 >= l3 of the voxel centres' covariance.
     pub linearity: f64,
     pub planarity: f64,
@@ -118,6 +120,7 @@ pub fn features(
         })
         .count();
     let seen = sample.len();
+    let on_top = sample.iter().filter(|q| (z1 - q.z).abs() < face_tolerance_m).count();
     // Thickness from the raw points (the voxel centres are smoothed).
     let rn = raw.iter().step_by(stride).count().max(1) as f64;
     let rmean = raw.iter().step_by(stride).sum::<Vector3<f64>>() / rn;
@@ -152,6 +155,7 @@ pub fn features(
         bottom_m: lo.z,
         top_m: hi.z,
         face_share: on as f64 / seen.max(1) as f64,
+        top_share: on_top as f64 / seen.max(1) as f64,
         linearity,
         planarity,
         thickness_m,
