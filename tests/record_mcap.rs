@@ -351,3 +351,33 @@ fn damaged_recordings_give_errors_not_panics() {
         }
     }
 }
+
+#[test]
+fn starc_inspect_summarizes_a_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("all.mcap");
+    let expected = write_everything(&path, ChunkCompression::Lz4);
+    let out = Command::new(env!("CARGO_BIN_EXE_starc")).arg("inspect").arg(&path).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    println!("{text}");
+    assert!(text.contains("(MCAP, finished)"), "{text}");
+    assert!(text.contains(&format!("{} on 8 topics", expected.len())), "{text}");
+    let imu = text.lines().find(|l| l.starts_with("/robot/imu")).unwrap();
+    assert!(imu.contains("sensor_msgs/msg/Imu") && imu.contains(" 100 ") && imu.ends_with("200.0"), "{imu}");
+
+    let out = Command::new(env!("CARGO_BIN_EXE_starc")).args(["inspect", "--json"]).arg(&path).output().unwrap();
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["messages"], expected.len());
+    assert_eq!(v["topics"]["/robot/points"]["messages"], 5);
+    assert_eq!(v["finished"], true);
+
+    // Cut in the middle: summarized up to the damage, exit status 1.
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_starc")).arg("inspect").arg(&cut).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!out.status.success(), "{text}");
+    assert!(text.contains("not finished"), "{text}");
+}

@@ -1,4 +1,5 @@
-//! `starc inspect FILE [--json]`: what a capture (pcap, pcapng, .lvx) of Livox traffic holds.
+//! `starc inspect FILE [--json]`: what a capture (pcap, pcapng, .lvx) of Livox traffic holds,
+//! or what a STARC recording (MCAP) holds: topics, types, counts, time span (docs/record.md).
 //!
 //! The counting is `starc_livox::capture::summarize`; this file only prints. The JSON keys are
 //! documented in docs/inspect.md.
@@ -10,7 +11,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Capture file: pcap, pcapng or .lvx (recognised by its first bytes).
+    /// Capture file: pcap, pcapng or .lvx, or an MCAP recording (recognised by its first bytes).
     pub file: PathBuf,
     /// Print the summary as JSON (keys in docs/inspect.md) instead of a table.
     #[arg(long)]
@@ -18,6 +19,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if is_mcap(&args.file) {
+        return run_mcap(&args);
+    }
     let mut cap = capture::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;
     let summary = capture::summarize(&mut cap);
     if args.json {
@@ -164,6 +168,58 @@ pub fn table(name: &str, s: &CaptureSummary) -> String {
         }
     }
     if let Some(e) = &s.read_error {
+        let _ = writeln!(o, "\n{:<16}{e}", "read error");
+    }
+    o
+}
+
+fn is_mcap(path: &std::path::Path) -> bool {
+    use std::io::Read;
+    let mut magic = [0u8; 8];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == *b"\x89MCAP0\r\n"
+}
+
+/// An MCAP recording: read as far as it goes (a crashed recording is summarized up to its last
+/// complete chunk, then exit status 1).
+fn run_mcap(args: &Args) -> anyhow::Result<()> {
+    use starc_pipeline::record::reader;
+    let bytes = reader::read_file(&args.file)?;
+    let s = reader::summarize(&bytes).with_context(|| format!("reading {}", args.file.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        print!("{}", mcap_table(&args.file.display().to_string(), &s));
+    }
+    if let Some(e) = &s.stopped_by {
+        anyhow::bail!("{}: reading stopped early (everything before is summarized): {e}", args.file.display());
+    }
+    Ok(())
+}
+
+fn ns_text(ns: u64) -> String {
+    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+/// The human-readable report of a recording.
+pub fn mcap_table(name: &str, s: &starc_pipeline::record::RecordingSummary) -> String {
+    let mut o = String::new();
+    let state = if s.finished { "finished" } else { "not finished: no summary (crash or still recording)" };
+    let _ = writeln!(o, "{:<16}{name} (MCAP, {state})", "file");
+    let _ = writeln!(o, "{:<16}{} on {} topics", "messages", s.messages, s.topics.len());
+    if let (Some(a), Some(b)) = (s.start_ns, s.end_ns) {
+        let _ = writeln!(o, "{:<16}{} .. {}, {:.3} s", "log time", ns_text(a), ns_text(b), (b - a) as f64 * 1e-9);
+    }
+    let _ = writeln!(o, "\n{:<28}{:<38}{:>9}{:>10}", "topic", "type", "messages", "rate Hz");
+    for (topic, t) in &s.topics {
+        let span_s = (t.last_ns - t.first_ns) as f64 * 1e-9;
+        let rate = if t.messages > 1 && span_s > 0.0 {
+            format!("{:.1}", (t.messages - 1) as f64 / span_s)
+        } else {
+            "-".into()
+        };
+        let _ = writeln!(o, "{topic:<28}{:<38}{:>9}{rate:>10}", t.type_name, t.messages);
+    }
+    if let Some(e) = &s.stopped_by {
         let _ = writeln!(o, "\n{:<16}{e}", "read error");
     }
     o
