@@ -381,3 +381,26 @@ fn starc_inspect_summarizes_a_recording() {
     assert!(!out.status.success(), "{text}");
     assert!(text.contains("not finished"), "{text}");
 }
+
+#[test]
+fn drop_finishes_and_bad_calls_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("dropped.mcap");
+    {
+        let mut rec = Recorder::create(&path, RecorderOptions::default()).unwrap();
+        rec.imu(ptp(T0_NS), [0.0; 3], [0.0, 0.0, 9.81]).unwrap();
+        // refused, and nothing written: another clock, a time ROS 2 cannot hold, a cloud without a start
+        assert!(rec.imu(Stamp::new(T0_NS, Clock::Host), [0.0; 3], [0.0; 3]).is_err());
+        assert!(rec.imu(ptp(u64::MAX), [0.0; 3], [0.0; 3]).is_err());
+        assert!(rec.point_cloud(&PointCloud::new(None, vec![CloudPoint::xyz(1.0, 0.0, 0.0)])).is_err());
+        assert_eq!(rec.stats().messages, 1);
+    } // dropped without finish()
+    let bytes = std::fs::read(&path).unwrap();
+    let s = reader::summarize(&bytes).unwrap();
+    assert!(s.finished && s.stopped_by.is_none() && s.messages == 1, "{s:?}");
+
+    let mut rec = Recorder::create(&dir.path().join("f.mcap"), RecorderOptions::default()).unwrap();
+    rec.finish().unwrap();
+    assert!(rec.imu(ptp(T0_NS), [0.0; 3], [0.0; 3]).is_err(), "a write after finish() must fail");
+    assert!(rec.finish().is_ok(), "finish() twice is harmless");
+}
