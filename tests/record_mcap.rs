@@ -242,6 +242,9 @@ fn real_peers_decode_every_message() {
         }
         assert_eq!(r["summary_messages"], n);
         assert_eq!(r["topics"].as_object().unwrap().len(), Topic::ALL.len());
+        // rosbags parses our QoS metadata: the extrinsics are latched for `ros2 bag play`
+        assert_eq!(r["durability"]["/tf_static"], json!(["transient_local"]), "{r}");
+        assert_eq!(r["durability"]["/robot/imu"], json!(["volatile"]), "{r}");
     }
 }
 

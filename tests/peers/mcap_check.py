@@ -151,7 +151,11 @@ def full(path, expected_path):
 
     # 2. rosbags AnyReader: the .mcap opened as a rosbag2 recording.
     got_rosbags = []
+    qos = {}
     with AnyReader([Path(path)]) as reader:
+        for conn in reader.connections:
+            profiles = conn.ext.offered_qos_profiles
+            qos[conn.topic] = [p.durability.name.lower() for p in profiles]
         for conn, timestamp, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
             got_rosbags.append([conn.topic, timestamp, summarize(conn.topic, msg)])
@@ -175,6 +179,7 @@ def full(path, expected_path):
                 "ok": not failures,
                 "counts": counts,
                 "topics": topics,
+                "durability": qos,
                 "summary_messages": stats.message_count if stats else None,
                 "summary_chunks": stats.chunk_count if stats else None,
                 "failures": failures[:10],

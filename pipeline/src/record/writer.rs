@@ -190,7 +190,8 @@ impl Recorder {
         let writer = self.writer.as_mut().ok_or_else(finished)?;
         let schema_id =
             writer.add_schema(type_name, "ros2msg", text.as_bytes()).map_err(mcap_err("adding a schema"))?;
-        let id = writer.add_channel(schema_id, topic, "cdr", &BTreeMap::new()).map_err(mcap_err("adding a channel"))?;
+        let metadata = BTreeMap::from([("offered_qos_profiles".to_string(), offered_qos(topic))]);
+        let id = writer.add_channel(schema_id, topic, "cdr", &metadata).map_err(mcap_err("adding a channel"))?;
         self.channels.insert(topic.to_string(), id);
         Ok(id)
     }
@@ -407,6 +408,19 @@ impl Recorder {
         }
         Ok(self.stats)
     }
+}
+
+/// The QoS `ros2 bag play` republishes a topic with (rosbag2's channel metadata, Humble's
+/// integer form): reliable, volatile, keep last 10; `/tf_static` transient local, keep last 1,
+/// so late subscribers still get the extrinsics.
+fn offered_qos(topic: &str) -> String {
+    const INFINITE: &str = "\n    sec: 2147483647\n    nsec: 4294967295";
+    let (durability, depth) = if topic == super::Topic::TfStatic.name() { (1, 1) } else { (2, 10) };
+    format!(
+        "- history: 1\n  depth: {depth}\n  reliability: 1\n  durability: {durability}\n  deadline:{INFINITE}\n  \
+         lifespan:{INFINITE}\n  liveliness: 1\n  liveliness_lease_duration:{INFINITE}\n  \
+         avoid_ros_namespace_conventions: false\n"
+    )
 }
 
 fn finished() -> PipelineError {
