@@ -5,9 +5,10 @@
 //!
 //! Run with `cargo bench -p starc-pipeline --bench record`. Prints per configuration: wall time,
 //! messages/s, payload MB/s (CDR bytes handed to the writer), file MB/s and file size, and the
-//! part spent in CDR encoding alone; then the read-back rate. With `STARC_BENCH_PY=1` it also
-//! times the PyPI `mcap` writer writing the very same payloads (tests/peers/mcap_write_bench.py,
-//! run from `.venv/bin/python`).
+//! part spent in CDR encoding alone; then the read-back rate. Files go to the temp directory
+//! (page cache); `none+sync` is `sync_chunks: true`, an fdatasync per chunk: what surviving a
+//! power cut costs on this disk. With `STARC_BENCH_PY=1` it also times the PyPI `mcap` writer
+//! writing the very same payloads (tests/peers/mcap_write_bench.py, run from `.venv/bin/python`).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use starc_pipeline::cloud::{CloudPoint, PointCloud};
@@ -49,8 +50,8 @@ fn scan(k: u64, seed: &mut u64) -> PointCloud {
     PointCloud::new(Some(Stamp::new(T0_NS + k * 100_000_000, Clock::Ptp)), points)
 }
 
-fn write(path: &Path, compression: ChunkCompression, scans: &[PointCloud]) -> (f64, u64) {
-    let options = RecorderOptions { compression, ..RecorderOptions::default() };
+fn write(path: &Path, compression: ChunkCompression, sync_chunks: bool, scans: &[PointCloud]) -> (f64, u64) {
+    let options = RecorderOptions { compression, sync_chunks, ..RecorderOptions::default() };
     let t = Instant::now();
     let mut rec = Recorder::create(path, options).unwrap();
     for i in 0..SECONDS * 200 {
@@ -120,18 +121,23 @@ fn run_mix(label: &str, scans: &[PointCloud]) {
         encoded as f64 / 1e6 / enc_s
     );
 
-    for (name, compression) in [("none", ChunkCompression::None), ("lz4", ChunkCompression::Lz4)] {
+    let configs = [
+        ("none", ChunkCompression::None, false),
+        ("lz4", ChunkCompression::Lz4, false),
+        ("none+sync", ChunkCompression::None, true),
+    ];
+    for (name, compression, sync) in configs {
         let path = dir.join(format!("mix_{name}.mcap"));
         let mut best = f64::MAX;
         let mut payload = 0;
         for _ in 0..3 {
-            let (s, p) = write(&path, compression, scans);
+            let (s, p) = write(&path, compression, sync, scans);
             best = best.min(s);
             payload = p;
         }
         let file = std::fs::metadata(&path).unwrap().len();
         println!(
-            "write {name:<4}: best of 3 {:7.1} ms = {:8.0} msg/s, payload {:6.0} MB/s, file {:6.0} MB/s, file {:.1} MB ({:.0}% of payload); {:.1}x real time",
+            "write {name:<9}: best of 3 {:7.1} ms = {:8.0} msg/s, payload {:6.0} MB/s, file {:6.0} MB/s, file {:.1} MB ({:.0}% of payload); {:.1}x real time",
             best * 1e3,
             messages as f64 / best,
             payload as f64 / 1e6 / best,
@@ -151,7 +157,7 @@ fn run_mix(label: &str, scans: &[PointCloud]) {
         let s = t.elapsed().as_secs_f64();
         assert_eq!(n, messages);
         println!(
-            "read  {name:<4}: {:7.1} ms = {:8.0} msg/s, {:6.0} MB/s of payload (scan + typed decode, from memory)",
+            "read  {name:<9}: {:7.1} ms = {:8.0} msg/s, {:6.0} MB/s of payload (scan + typed decode, from memory)",
             s * 1e3,
             n as f64 / s,
             payload as f64 / 1e6 / s
