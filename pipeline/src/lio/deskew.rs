@@ -4,7 +4,10 @@
 use super::propagate::Knot;
 use super::state::State;
 use super::types::TimedPoint;
-use nalgebra::Vector3;
+use nalgebra::{Rotation3, Vector3};
+
+/// Points fired within this of each other are moved with one pose.
+const SHARE_POSE_NS: u64 = 50_000;
 
 /// De-skews `points` with `knots` (sorted by time, covering the scan) into the LiDAR frame of
 /// `end` (the state at the scan's end). Points before the first knot use the first knot.
@@ -12,24 +15,36 @@ pub fn deskew(points: &[TimedPoint], knots: &[Knot], end: &State, out: &mut Vec<
     out.clear();
     let (r_il, t_il) = (end.rot_imu_lidar, end.pos_imu_lidar);
     let end_inv = end.rot.inverse();
+    // Points a few tens of microseconds apart share one pose (at 1 rad/s that is 50 urad):
+    // one pose per firing block instead of per point.
+    let mut cached: Option<(u64, Rotation3<f64>, Vector3<f64>)> = None;
+    let r_li = r_il.inverse();
     for p in points {
-        let i = knots.partition_point(|k| k.t_ns <= p.t_ns).saturating_sub(1);
-        let Some(k) = knots.get(i) else {
-            out.push(p.xyz());
-            continue;
+        let (rot, pos) = match cached {
+            Some((t, rot, pos)) if p.t_ns.abs_diff(t) <= SHARE_POSE_NS => (rot, pos),
+            _ => {
+                let i = knots.partition_point(|k| k.t_ns <= p.t_ns).saturating_sub(1);
+                let Some(k) = knots.get(i) else {
+                    out.push(p.xyz());
+                    continue;
+                };
+                let dt_s = p.t_ns.saturating_sub(k.t_ns) as f64 * 1e-9;
+                let (rot, pos) = k.pose_after(dt_s);
+                // Straight to the end frame: IMU(t) -> world -> IMU(end).
+                let rel = end_inv * rot;
+                let rel_pos = end_inv * (pos - end.pos);
+                cached = Some((p.t_ns, rel, rel_pos));
+                (rel, rel_pos)
+            }
         };
-        let dt_s = p.t_ns.saturating_sub(k.t_ns) as f64 * 1e-9;
-        let (rot, pos) = k.pose_after(dt_s);
-        let world = rot * (r_il * p.xyz() + t_il) + pos;
-        let imu_end = end_inv * (world - end.pos);
-        out.push(r_il.inverse() * (imu_end - t_il));
+        let imu_end = rot * (r_il * p.xyz() + t_il) + pos;
+        out.push(r_li * (imu_end - t_il));
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Rotation3;
 
     #[test]
     fn a_point_fired_before_a_forward_move_is_moved_back() {

@@ -15,6 +15,10 @@ use serde::{Deserialize, Serialize};
 pub struct HealthConfig {
     /// A scan with fewer plane matches than this cannot correct the state.
     pub min_matched: usize,
+    /// A scan whose update did not settle and matched fewer than this share of its points is
+    /// refused (a glitch, a scan from the wrong place); a settled update into new, unmapped
+    /// space may match fewer and is kept.
+    pub min_match_ratio: f64,
     /// Eigen-directions of the update's normalised information (the degeneracy index's
     /// eigenvalues, between 0 and 1/3) below this take no update: the IMU carries them.
     pub min_direction_info: f64,
@@ -32,6 +36,7 @@ impl Default for HealthConfig {
     fn default() -> Self {
         Self {
             min_matched: 30,
+            min_match_ratio: 0.5,
             min_direction_info: 0.005,
             max_rms_m: 0.15,
             max_correction_m: 0.3,
@@ -45,6 +50,7 @@ impl HealthConfig {
     pub fn validate(&self) -> Result<(), String> {
         let finite = [
             ("health.min_direction_info", self.min_direction_info),
+            ("health.min_match_ratio", self.min_match_ratio),
             ("health.max_rms_m", self.max_rms_m),
             ("health.max_correction_m", self.max_correction_m),
             ("health.max_correction_deg", self.max_correction_deg),
@@ -91,6 +97,7 @@ impl Health {
 pub enum Refusal {
     TooFewMatches,
     LargeResidual,
+    PoorFit,
     LargeCorrection,
 }
 
@@ -99,6 +106,7 @@ impl Refusal {
         match self {
             Self::TooFewMatches => "too_few_matches",
             Self::LargeResidual => "large_residual",
+            Self::PoorFit => "poor_fit",
             Self::LargeCorrection => "large_correction",
         }
     }
@@ -116,6 +124,9 @@ pub struct Verdict {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ScanFit {
     pub matched: usize,
+    /// Points that entered the update.
+    pub used: usize,
+    pub converged: bool,
     pub rms_m: f64,
     pub correction_m: f64,
     pub correction_deg: f64,
@@ -144,6 +155,8 @@ impl HealthMonitor {
             Some(Refusal::TooFewMatches)
         } else if fit.rms_m > cfg.max_rms_m {
             Some(Refusal::LargeResidual)
+        } else if !fit.converged && (fit.matched as f64) < cfg.min_match_ratio * fit.used as f64 {
+            Some(Refusal::PoorFit)
         } else if !self.lost && (fit.correction_m > cfg.max_correction_m || fit.correction_deg > cfg.max_correction_deg)
         {
             Some(Refusal::LargeCorrection)
@@ -177,6 +190,8 @@ mod tests {
         let mut m = HealthMonitor::default();
         let fit = |matched, rms_m, correction_m, correction_deg, weak_directions| ScanFit {
             matched,
+            used: 600,
+            converged: true,
             rms_m,
             correction_m,
             correction_deg,
@@ -196,5 +211,10 @@ mod tests {
         assert_eq!((v.health, v.refused), (Health::Degenerate, None));
         assert!(!m.is_lost());
         assert_eq!((m.scans_refused, m.times_lost), (3, 1));
+        // An unsettled update that matched a third of its points is a glitch; settled, it is new space.
+        let poor = ScanFit { matched: 200, used: 600, converged: false, rms_m: 0.05, ..ScanFit::default() };
+        assert_eq!(m.judge(&cfg, 1_300_000_000, &poor).refused, Some(Refusal::PoorFit));
+        let new_space = ScanFit { converged: true, ..poor };
+        assert_eq!(m.judge(&cfg, 1_400_000_000, &new_space).refused, None);
     }
 }

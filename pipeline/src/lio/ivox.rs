@@ -2,8 +2,8 @@
 //! nearest neighbours come from the query's voxel and its 26 neighbours. Voxels far from the
 //! sensor are dropped, so the map stays local and its cost bounded.
 
+use super::voxel_hash::VoxelHashMap;
 use nalgebra::Vector3;
-use std::collections::HashMap;
 
 type Key = (i32, i32, i32);
 
@@ -14,13 +14,13 @@ pub struct VoxelMap {
     /// A new point closer than this to one already in its voxel adds nothing.
     min_spacing_m: f64,
     radius_m: f64,
-    voxels: HashMap<Key, Vec<Vector3<f64>>>,
+    voxels: VoxelHashMap<Key, Vec<Vector3<f64>>>,
     points: usize,
 }
 
 impl VoxelMap {
     pub fn new(resolution_m: f64, per_voxel: usize, min_spacing_m: f64, radius_m: f64) -> Self {
-        Self { resolution_m, per_voxel, min_spacing_m, radius_m, voxels: HashMap::new(), points: 0 }
+        Self { resolution_m, per_voxel, min_spacing_m, radius_m, voxels: VoxelHashMap::default(), points: 0 }
     }
 
     pub fn len(&self) -> usize {

@@ -8,8 +8,9 @@ use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::types::{ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
+use super::voxel_hash::VoxelHashMap;
 use nalgebra::{Isometry3, Rotation3, Vector3};
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::time::Instant;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -97,6 +98,8 @@ pub struct Lio {
     scans: VecDeque<LioScan>,
     map: VoxelMap,
     monitor: HealthMonitor,
+    /// Scans whose update was applied.
+    updates_accepted: u64,
     scans_done: u64,
     knots: Vec<Knot>,
     deskewed: Vec<Vector3<f64>>,
@@ -126,6 +129,7 @@ impl Lio {
             scans: VecDeque::new(),
             map,
             monitor: HealthMonitor::default(),
+            updates_accepted: 0,
             scans_done: 0,
             knots: Vec::new(),
             deskewed: Vec::new(),
@@ -241,6 +245,8 @@ impl Lio {
             let moved = prior.lidar_pose().inverse() * self.state.lidar_pose();
             let fit = ScanFit {
                 matched: report.matched,
+                used: used.len(),
+                converged: report.converged,
                 rms_m: report.rms_m,
                 correction_m: moved.translation.vector.norm(),
                 correction_deg: moved.rotation.angle().to_degrees(),
@@ -254,9 +260,13 @@ impl Lio {
             verdict = Some(v);
         }
         let refused = verdict.and_then(|v| v.refused);
-        // A lost filter whose map is too thin to match grows the map from the IMU's pose;
-        // otherwise it would never have anything to find itself in.
-        let grow_anyway = refused == Some(Refusal::TooFewMatches) && self.monitor.is_lost();
+        // A map too thin to match (the first scans, or a lost filter's) grows from the IMU's
+        // pose; otherwise the filter would never have anything to find itself in.
+        let grow_anyway =
+            refused == Some(Refusal::TooFewMatches) && (self.monitor.is_lost() || self.updates_accepted == 0);
+        if verdict.is_some() && refused.is_none() {
+            self.updates_accepted += 1;
+        }
         if refused.is_none() || grow_anyway {
             let (r, t) =
                 (self.state.rot * self.state.rot_imu_lidar, self.state.rot * self.state.pos_imu_lidar + self.state.pos);
@@ -308,7 +318,8 @@ impl Lio {
 
 /// One centroid per occupied voxel, in voxel order (so runs repeat exactly).
 fn voxel_centroids<'a>(points: impl Iterator<Item = &'a Vector3<f64>>, voxel_m: f64) -> Vec<Vector3<f64>> {
-    let mut cells: HashMap<(i32, i32, i32), (Vector3<f64>, u32)> = HashMap::with_capacity(4096);
+    let mut cells: VoxelHashMap<(i32, i32, i32), (Vector3<f64>, u32)> = VoxelHashMap::default();
+    cells.reserve(4096);
     for p in points {
         let k = ((p.x / voxel_m).floor() as i32, (p.y / voxel_m).floor() as i32, (p.z / voxel_m).floor() as i32);
         let e = cells.entry(k).or_insert((Vector3::zeros(), 0));
