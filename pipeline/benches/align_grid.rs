@@ -11,7 +11,8 @@
 //! ratio of the peers' median time to ours. Then the basin of one attempt without the search.
 //!
 //! Environment: STARC_ALIGN_CONFIG (TOML overriding the defaults), STARC_ALIGN_NO_PEERS=1,
-//! STARC_ALIGN_NO_SIM=1, STARC_ALIGN_NO_BASIN=1, STARC_ALIGN_VERBOSE=1 (one line per trial).
+//! STARC_ALIGN_SIM (`scenario:duration_s:t_end_s:window_s,...`; empty for none),
+//! STARC_ALIGN_NO_REAL=1, STARC_ALIGN_NO_BASIN=1, STARC_ALIGN_VERBOSE=1 (one line per trial).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "align_sim/mod.rs"]
@@ -43,7 +44,17 @@ struct Outcome {
     err_m: f64,
     err_deg: f64,
     ms: f64,
+    /// CPU time of the aligning thread (robust to other load on this shared machine).
+    cpu_ms: f64,
     ok: bool,
+}
+
+/// CPU time of the calling thread (ms).
+fn thread_cpu_ms() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes into the timespec we own.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
 }
 
 fn pct(sorted: &[f64], p: f64) -> f64 {
@@ -62,6 +73,7 @@ fn sorted(v: impl Iterator<Item = f64>) -> Vec<f64> {
 
 struct Summary {
     time_median_ms: f64,
+    cpu_median_ms: f64,
 }
 
 fn summarize(name: &str, outcomes: &[Outcome]) -> Summary {
@@ -70,8 +82,9 @@ fn summarize(name: &str, outcomes: &[Outcome]) -> Summary {
     let em = sorted(outcomes.iter().map(|o| o.err_m * 100.0));
     let ed = sorted(outcomes.iter().map(|o| o.err_deg));
     let t = sorted(outcomes.iter().map(|o| o.ms));
+    let c = sorted(outcomes.iter().map(|o| o.cpu_ms));
     println!(
-        "| {name:<10} | {ok:>3}/{n:<3} {:>6.1} % | {:>7.2} / {:>8.2} | {:>6.3} / {:>7.3} | {:>7.1} / {:>7.1} |",
+        "| {name:<10} | {ok:>3}/{n:<3} {:>6.1} % | {:>7.2} / {:>8.2} | {:>6.3} / {:>7.3} | {:>7.1} / {:>7.1} | {:>7.1} / {:>7.1} |",
         100.0 * ok as f64 / n.max(1) as f64,
         pct(&em, 0.5),
         pct(&em, 0.99),
@@ -79,8 +92,10 @@ fn summarize(name: &str, outcomes: &[Outcome]) -> Summary {
         pct(&ed, 0.99),
         pct(&t, 0.5),
         pct(&t, 0.99),
+        pct(&c, 0.5),
+        pct(&c, 0.99),
     );
-    Summary { time_median_ms: pct(&t, 0.5) }
+    Summary { time_median_ms: pct(&t, 0.5), cpu_median_ms: pct(&c, 0.5) }
 }
 
 fn write_f64(path: &Path, pts: &[Vec3]) {
@@ -136,8 +151,9 @@ fn run_peers(
         }
         let (err_m, err_deg) = pose_from_rows(&rows).map_or((f64::INFINITY, 180.0), |p| pose_error(&p, truth));
         let ms = v["ms"].as_f64().unwrap();
+        let cpu_ms = v["cpu_ms"].as_f64().unwrap();
         let entry = peers.iter_mut().find(|p| p.0 == peer).unwrap();
-        entry.2.push(Outcome { err_m, err_deg, ms, ok: err_m < TOL_M && err_deg < TOL_DEG });
+        entry.2.push(Outcome { err_m, err_deg, ms, cpu_ms, ok: err_m < TOL_M && err_deg < TOL_DEG });
     }
     peers
 }
@@ -147,6 +163,21 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
     println!("\n## {name}: source {} points, target {} points", source.len(), target.len());
     let aligner = Aligner::new(target, config.clone()).unwrap();
     println!("target preparation {:.1} ms", aligner.prepare_ms);
+    // How well the pair fits at its truth: one attempt from the truth itself.
+    let single = Aligner::new(target, AlignConfig { reseed_yaw_step_deg: 0.0, ..config.clone() }).unwrap();
+    let r = single.align(source, truth);
+    if let Some(a) = r.best() {
+        let (e_m, e_deg) = pose_error(&r.pose, truth);
+        println!(
+            "from the truth: accepted {}, moved {:.2} cm {:.3} deg; rms {:.3} m, inlier ratio {:.3}, degeneracy {:.4}",
+            r.accepted,
+            e_m * 100.0,
+            e_deg,
+            a.metrics.rms_residual_m,
+            a.metrics.inlier_ratio,
+            a.metrics.degeneracy_index
+        );
+    }
     let mut starts = Vec::new();
     let mut ours = Vec::new();
     let mut attempts_hist = [0usize; 8];
@@ -155,12 +186,14 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
             let k = si * 24 + y;
             let yaw = y as f64 * 15.0 - 180.0;
             let s = start(truth, k, yaw, shift);
+            let c0 = thread_cpu_ms();
             let r = aligner.align(source, &s);
+            let cpu_ms = thread_cpu_ms() - c0;
             let (err_m, err_deg) = pose_error(&r.pose, truth);
             let ok = r.accepted && err_m < TOL_M && err_deg < TOL_DEG;
             if verbose || !ok {
                 println!(
-                    "  trial yaw {yaw:+5.0} shift {shift:.2}: {} err {:.2} cm {:.3} deg {:.1} ms (seeds {:.1} ms) attempts {} best seed {:+.0} deg{}",
+                    "  trial yaw {yaw:+5.0} shift {shift:.2}: {} err {:.2} cm {:.3} deg {:.1} ms (seeds {:.1} ms) attempts {} best seed {:+.0} deg, degeneracy {:.4}{}",
                     if ok { "ok  " } else { "FAIL" },
                     err_m * 100.0,
                     err_deg,
@@ -168,12 +201,13 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
                     r.seed_ms,
                     r.attempts.len(),
                     r.best().map_or(0.0, |a| a.seed_yaw_offset_deg),
+                    r.best().map_or(0.0, |a| a.metrics.degeneracy_index),
                     r.failure.as_ref().map_or(String::new(), |f| format!(" ({f})")),
                 );
             }
             attempts_hist[r.attempts.len().min(7)] += 1;
             starts.push(s);
-            ours.push(Outcome { err_m, err_deg, ms: r.total_ms, ok });
+            ours.push(Outcome { err_m, err_deg, ms: r.total_ms, cpu_ms, ok });
         }
     }
     let peers = if std::env::var_os("STARC_ALIGN_NO_PEERS").is_some() {
@@ -186,15 +220,20 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
         starts.len(),
         TOL_M * 100.0
     );
-    println!("| method     | success          | err cm med / p99  | err deg med / p99 | ms med / p99      |");
-    println!("|------------|------------------|-------------------|-------------------|-------------------|");
+    println!("| method     | success          | err cm med / p99  | err deg med / p99 | wall ms med / p99 | cpu ms med / p99  |");
+    println!("|------------|------------------|-------------------|-------------------|-------------------|-------------------|");
     let mine = summarize("STARC", &ours);
     let mut ratios = Vec::new();
     for (peer, prep, outcomes) in &peers {
         let s = summarize(peer, outcomes);
-        ratios
-            .push(format!("{peer} {:.2}x (its preparation {prep:.1} ms once)", s.time_median_ms / mine.time_median_ms));
+        ratios.push(format!(
+            "{peer} {:.2}x wall, {:.2}x cpu (its preparation {prep:.1} ms once)",
+            s.time_median_ms / mine.time_median_ms,
+            s.cpu_median_ms / mine.cpu_median_ms
+        ));
     }
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!("load average at the end: {}", load.split_whitespace().take(3).collect::<Vec<_>>().join(" "));
     println!(
         "full attempts per trial (1..): {:?}; peers' median time / ours: {}",
         &attempts_hist[1..],
@@ -250,16 +289,27 @@ fn real_pair() -> (Vec<Vec3>, Vec<Vec3>, Isometry3<f64>) {
 fn main() {
     let config = AlignConfig::from_toml(&std::env::var("STARC_ALIGN_CONFIG").unwrap_or_default()).unwrap();
     let (source, target, truth) = real_pair();
-    scenario("real pair (shared/data/registration)", &source, &target, &truth, &config);
-    let sim = if std::env::var_os("STARC_ALIGN_NO_SIM").is_some() { None } else { Some(align_sim::lab_pair()) };
-    if let Some(p) = &sim {
+    let real = std::env::var_os("STARC_ALIGN_NO_REAL").is_none();
+    if real {
+        scenario("real pair (shared/data/registration)", &source, &target, &truth, &config);
+    }
+    // STARC_ALIGN_SIM: scenario:duration_s:t_end_s:window_s,... (empty: none).
+    let spec = std::env::var("STARC_ALIGN_SIM").unwrap_or_else(|_| "office:30:26:12".into());
+    let mut sims = Vec::new();
+    for item in spec.split(',').filter(|s| !s.is_empty()) {
+        let f: Vec<&str> = item.split(':').collect();
+        let num = |i: usize| f[i].parse::<f64>().unwrap();
+        let p = align_sim::sim_pair(f[0], num(1), num(2), num(3));
         println!("\nsimulated pair: {}", p.describe);
-        scenario("simulated lab", &p.source, &p.target, &p.truth, &config);
+        scenario(&format!("simulated {}", f[0]), &p.source, &p.target, &p.truth, &config);
+        sims.push((f[0].to_string(), p));
     }
     if std::env::var_os("STARC_ALIGN_NO_BASIN").is_none() {
-        basin("real pair", &source, &target, &truth, &config);
-        if let Some(p) = &sim {
-            basin("simulated lab", &p.source, &p.target, &p.truth, &config);
+        if real {
+            basin("real pair", &source, &target, &truth, &config);
+        }
+        for (name, p) in &sims {
+            basin(&format!("simulated {name}"), &p.source, &p.target, &p.truth, &config);
         }
     }
 }

@@ -37,18 +37,20 @@ pub fn simulate(scenario: &str, duration_s: f64, tag: &str) -> SimRun {
     let dir = std::env::temp_dir().join(format!("starc_align_{tag}_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let (sc, text) = Scenario::load(scenario).unwrap();
+    // Scenarios shipped with these benches (beside this file) by name, else the simulator's.
+    let local = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("benches/align_sim/{scenario}.toml"));
+    let name = if local.exists() { local.to_string_lossy().into_owned() } else { scenario.to_string() };
+    let (sc, text) = Scenario::load(&name).unwrap();
     let opts = SimOptions { out: dir.clone(), duration_s: Some(duration_s), seed: 1, realtime: false, camera: false };
     run(&sc, &text, &opts, &mut |_, _| {}).unwrap();
     let pcap = dir.join("avia.pcap");
-    let run = SimRun {
+    SimRun {
         robot_truth: read_tum(&dir.join("gt_robot.tum")),
         fpv_truth: read_tum(&dir.join("gt_fpv.tum")),
         robot: decode(&pcap, ROBOT_AVIA_IP),
         fpv: decode(&pcap, FPV_AVIA_IP),
         dir,
-    };
-    run
+    }
 }
 
 impl Drop for SimRun {
@@ -115,19 +117,21 @@ pub struct Pair {
     pub describe: String,
 }
 
-/// The lab: the robot's map (every robot scan of 20 s, placed by the robot's true poses, reduced
-/// to 5 cm voxels) against the rig's scans over 1 s ending at 10 s (placed by the rig's true poses
-/// relative to its pose at 10 s), so the truth is the rig's true pose at 10 s.
-pub fn lab_pair() -> Pair {
-    let sim = simulate("lab", 20.0, "grid");
+/// A scenario's pair: the robot's map (every robot scan of the run, placed by the robot's true
+/// poses, reduced to 5 cm voxels) against the rig's scans over `window_s` ending at `t_end_s`
+/// (placed by the rig's true poses relative to its pose at `t_end_s`), so the truth is the rig's
+/// true pose at `t_end_s`.
+pub fn sim_pair(scenario: &str, duration_s: f64, t_end_s: f64, window_s: f64) -> Pair {
+    let sim = simulate(scenario, duration_s, "grid");
     let t0 = sim.robot_truth.first().map_or(0, |t| t.0);
-    let end = t0 + 10_000_000_000;
+    let end = t0 + (t_end_s * 1e9) as u64;
     let target = voxel_downsample(&accumulate(&sim.robot.scans, 0, u64::MAX, |t| truth_at(&sim.robot_truth, t)), 0.05);
     let at_end = truth_at(&sim.fpv_truth, end);
     let inv = at_end.inverse();
-    let source = accumulate(&sim.fpv.scans, end - 1_000_000_000, end, |t| inv * truth_at(&sim.fpv_truth, t));
+    let from = end.saturating_sub((window_s * 1e9) as u64);
+    let source = accumulate(&sim.fpv.scans, from, end, |t| inv * truth_at(&sim.fpv_truth, t));
     let describe = format!(
-        "`lab`, seed 1, 20 s: robot map {} scans (5 cm voxels); rig window 1 s ending at t = 10 s (rig at {:.2}, {:.2}, {:.2} m)",
+        "`{scenario}`, seed 1, {duration_s} s: robot map of {} scans (5 cm voxels); rig window {window_s} s ending at t = {t_end_s} s (rig at {:.2}, {:.2}, {:.2} m)",
         sim.robot.scans.len(),
         at_end.translation.x,
         at_end.translation.y,

@@ -85,7 +85,7 @@ impl Default for AlignConfig {
             max_rms_m: 0.1,
             min_inlier_ratio: 0.5,
             max_update_norm: 1e-3,
-            min_degeneracy_index: 1e-3,
+            min_degeneracy_index: 0.01,
             reseed_yaw_step_deg: 30.0,
             reseed_shift_m: 0.0,
             seed_source_voxel_m: 1.5,

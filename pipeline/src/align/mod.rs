@@ -15,15 +15,24 @@
 mod config;
 mod geometry;
 mod icp;
+mod map;
 mod ndt;
 mod register;
+mod tiles;
 
 pub use config::AlignConfig;
 pub use geometry::{
     cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample, Vec3,
     VoxelIndex,
 };
-pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt};
+pub use map::{
+    aggregate_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig, PreparedMap,
+    WindowConfig,
+};
+pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Seed};
+pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_map;

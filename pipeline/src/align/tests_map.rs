@@ -1,0 +1,134 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use super::*;
+use nalgebra::Isometry3;
+
+/// A 10 x 8 m room, floor at z = -1.2 and ceiling at 1.6 (so fixed heights would be wrong), with
+/// a table (a smaller horizontal surface at -0.45) and a wall-mounted shelf board.
+fn room() -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    let step = 0.05;
+    for i in 0..=200 {
+        for j in 0..=160 {
+            let (x, y) = (f64::from(i) * step, f64::from(j) * step);
+            pts.push(Vec3::new(x, y, -1.2));
+            pts.push(Vec3::new(x, y, 1.6));
+        }
+    }
+    for i in 0..=200 {
+        for k in 0..=56 {
+            let (a, z) = (f64::from(i) * step, -1.2 + f64::from(k) * step);
+            pts.push(Vec3::new(a, 0.0, z));
+            pts.push(Vec3::new(a, 8.0, z));
+            pts.push(Vec3::new(0.0, a * 0.8, z));
+            pts.push(Vec3::new(10.0, a * 0.8, z));
+        }
+    }
+    for i in 0..=30 {
+        for j in 0..=16 {
+            pts.push(Vec3::new(4.0 + f64::from(i) * step, 3.0 + f64::from(j) * step, -0.45));
+        }
+    }
+    pts
+}
+
+#[test]
+fn floor_and_ceiling_are_estimated_and_the_bands_removed() {
+    let c = MapPrepConfig::default();
+    let m = prepare_map(&room(), &c).unwrap();
+    assert!((m.floor_z_m - -1.2).abs() < 0.06, "floor {}", m.floor_z_m);
+    assert!((m.ceiling_z_m - 1.6).abs() < 0.06, "ceiling {}", m.ceiling_z_m);
+    assert!(m.removed_ground > 1000 && m.removed_ceiling > 1000, "{} {}", m.removed_ground, m.removed_ceiling);
+    let (lo, hi) = (m.floor_z_m + c.ground_band_m, m.ceiling_z_m - c.ceiling_band_m);
+    assert!(m.points.iter().all(|p| p.z >= lo && p.z <= hi));
+    // The table stays (it is above the ground band), and so do the walls between the bands.
+    assert!(m.points.iter().any(|p| (p.z - -0.45).abs() < 0.06 && p.x > 4.0 && p.x < 5.5));
+    assert!(m.points.iter().any(|p| p.x.abs() < 0.06 && p.z > 0.0));
+    assert_eq!(m.points.len(), m.normals.len());
+    // Nothing horizontal: no floor, a typed error.
+    let wall: Vec<Vec3> = (0..2000).map(|i| Vec3::new(f64::from(i % 50) * 0.1, 0.0, f64::from(i / 50) * 0.1)).collect();
+    assert!(prepare_map(&wall, &c).is_err());
+    assert!(prepare_map(&[], &c).is_err());
+}
+
+#[test]
+fn window_drops_boxes_and_moving_points() {
+    // A wall at x = 5 seen through the whole window, a person box at (2, 0), and a "walker"
+    // point that moves 1 m/s along y (each place seen in one slice only).
+    let mut pts = Vec::new();
+    for k in 0..1000u64 {
+        let t = k * 1_000_000; // 1 s
+        let y = (k % 100) as f64 * 0.05 - 2.5;
+        pts.push((t, Vec3::new(5.0, y, 1.0)));
+        pts.push((t, Vec3::new(2.0, 0.1 * (k % 3) as f64, 1.0)));
+        pts.push((t, Vec3::new(3.0, -2.0 + t as f64 * 1e-9 * 4.0, 0.5)));
+    }
+    let person = ExclusionBox { centre: Vec3::new(2.0, 0.0, 0.9), size_m: Vec3::new(0.6, 0.6, 1.8), yaw_rad: 0.5 };
+    let c = WindowConfig::default();
+    let (out, stats) = aggregate_window(&pts, |_| Some(Isometry3::identity()), &Isometry3::identity(), &[person], &c);
+    assert_eq!(stats.points_in, 3000);
+    assert_eq!(stats.excluded_boxes, 1000);
+    // The walker survives only where a voxel straddles a slice boundary (4 boundaries).
+    assert!(stats.excluded_moving >= 800, "{stats:?}");
+    let off_wall = out.iter().filter(|p| (p.x - 5.0).abs() > 1e-9).count();
+    assert!(off_wall <= 10, "{off_wall} points off the wall: {stats:?}");
+    assert!(out.len() - off_wall >= 40, "the wall stays: {stats:?}");
+    assert_eq!(stats.points_out, out.len());
+    // Points the poses cannot place are left out.
+    let (none, s) = aggregate_window(&pts, |_| None, &Isometry3::identity(), &[], &c);
+    assert!(none.is_empty() && s.points_out == 0);
+}
+
+#[test]
+fn tiles_round_trip_and_newer_versions_win() {
+    let m = prepare_map(&room(), &MapPrepConfig::default()).unwrap();
+    let tiles = encode_tiles(&m.points, &m.normals, 4.0, 0.01, 1).unwrap();
+    assert!(tiles.len() > 4);
+    let mut map = TileMap::default();
+    for (_, b) in &tiles {
+        assert!(map.apply(b).unwrap());
+    }
+    let (pts, nrm) = map.points();
+    assert_eq!(pts.len(), m.points.len());
+    // 1 cm steps: every point within half a step per axis of one original.
+    let mut orig: Vec<Vec3> = m.points.clone();
+    orig.sort_by(|a, b| a.x.total_cmp(&b.x));
+    for p in pts.iter().step_by(97) {
+        assert!(m.points.iter().any(|q| (p - q).amax() <= 0.005 + 1e-9), "{p:?}");
+    }
+    let with_normals = nrm.iter().filter(|n| n.is_some()).count();
+    assert_eq!(with_normals, m.normals.iter().filter(|n| n.is_some()).count());
+    // Same version again: ignored; a newer one replaces the tile.
+    let (key, first) = &tiles[0];
+    assert!(!map.apply(first).unwrap());
+    let only: Vec<Vec3> =
+        vec![Vec3::new(f64::from(key.0) * 4.0 + 0.5, f64::from(key.1) * 4.0 + 0.5, f64::from(key.2) * 4.0 + 0.5)];
+    let newer = encode_tiles(&only, &[None], 4.0, 0.01, 2).unwrap();
+    assert!(map.apply(&newer[0].1).unwrap());
+    assert_eq!(map.tile_count(), tiles.len());
+}
+
+#[test]
+fn damaged_tiles_are_typed_errors() {
+    let pts = vec![Vec3::new(0.5, 0.5, 0.5), Vec3::new(1.0, 2.0, 3.0)];
+    let tiles = encode_tiles(&pts, &[None, Some(Vec3::new(0.0, 0.0, 1.0))], 4.0, 0.01, 7).unwrap();
+    let good = &tiles[0].1;
+    let t = decode_tile(good).unwrap();
+    assert_eq!((t.key, t.version, t.points.len()), ((0, 0, 0), 7, 2));
+    // Every truncation, every single-bit flip: an error, never a panic.
+    for n in 0..good.len() {
+        assert!(decode_tile(&good[..n]).is_err(), "truncated to {n}");
+    }
+    for i in 0..good.len() {
+        for bit in 0..8 {
+            let mut b = good.clone();
+            b[i] ^= 1 << bit;
+            assert!(decode_tile(&b).is_err(), "byte {i} bit {bit}");
+        }
+    }
+    let mut long = good.clone();
+    long.push(0);
+    assert!(matches!(decode_tile(&long), Err(crate::PipelineError::Truncated { .. })));
+    assert!(encode_tiles(&pts, &[None, None], 0.0, 0.01, 1).is_err());
+    assert!(encode_tiles(&pts, &[None, None], 1000.0, 0.001, 1).is_err());
+}
