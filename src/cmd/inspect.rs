@@ -183,8 +183,7 @@ fn is_mcap(path: &std::path::Path) -> bool {
 /// complete chunk, then exit status 1).
 fn run_mcap(args: &Args) -> anyhow::Result<()> {
     use starc_pipeline::record::reader;
-    let bytes = reader::read_file(&args.file)?;
-    let s = reader::summarize(&bytes).with_context(|| format!("reading {}", args.file.display()))?;
+    let s = reader::summarize_file(&args.file).with_context(|| format!("reading {}", args.file.display()))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
     } else {

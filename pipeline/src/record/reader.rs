@@ -6,12 +6,14 @@
 //! container is parsed by [`super::scan`].
 
 use super::msgs::{CompressedImage, Imu, MarkerArray, Odometry, PointCloud2, PointField, RosMessage, TfMessage};
-use super::scan::Scanner;
+use super::scan::{is_finished, Scanner};
 use crate::cloud::{CloudPoint, PointCloud};
 use crate::PipelineError;
 use serde::Serialize;
 use starc_time::{Clock, Stamp};
 use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// How damage is handled.
@@ -70,14 +72,14 @@ impl RecordedMessage {
     }
 }
 
-/// Messages of a recording in file order.
-pub struct Messages<'a> {
-    scanner: Scanner<'a>,
+/// Messages of a recording in file order, from a file ([`open`]) or bytes ([`messages`]).
+pub struct Messages<R: Read> {
+    scanner: Scanner<R>,
     mode: ReadMode,
     stopped_by: Option<String>,
 }
 
-impl Messages<'_> {
+impl<R: Read> Messages<R> {
     /// Why a [`ReadMode::Recover`] read ended before the end of the data (`None`: it did not).
     pub fn stopped_by(&self) -> Option<&str> {
         self.stopped_by.as_deref()
@@ -85,11 +87,18 @@ impl Messages<'_> {
 }
 
 /// Iterates the messages of an MCAP held in memory. Fails only when `bytes` is not an MCAP.
-pub fn messages(bytes: &[u8], mode: ReadMode) -> Result<Messages<'_>, PipelineError> {
-    Ok(Messages { scanner: Scanner::new(bytes)?, mode, stopped_by: None })
+pub fn messages(bytes: &[u8], mode: ReadMode) -> Result<Messages<&[u8]>, PipelineError> {
+    Ok(Messages { scanner: Scanner::from_bytes(bytes)?, mode, stopped_by: None })
 }
 
-impl Iterator for Messages<'_> {
+/// Streams the messages of a recording file (one chunk in memory at a time).
+pub fn open(path: &Path, mode: ReadMode) -> Result<Messages<BufReader<File>>, PipelineError> {
+    let file = File::open(path).map_err(|e| PipelineError::io(format!("opening {}", path.display()), e))?;
+    let len = file.metadata().map_err(|e| PipelineError::io(format!("reading {}", path.display()), e))?.len();
+    Ok(Messages { scanner: Scanner::new(BufReader::with_capacity(1 << 20, file), len)?, mode, stopped_by: None })
+}
+
+impl<R: Read> Iterator for Messages<R> {
     type Item = Result<RecordedMessage, PipelineError>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -142,10 +151,26 @@ pub struct RecordingSummary {
     pub stopped_by: Option<String>,
 }
 
-/// Counts topics, messages and the time span; a damaged file is read as far as it goes.
+/// Counts topics, messages and the time span of bytes in memory; a damaged recording is read
+/// as far as it goes.
 pub fn summarize(bytes: &[u8]) -> Result<RecordingSummary, PipelineError> {
-    let mut s = RecordingSummary { finished: Scanner::is_finished(bytes), ..RecordingSummary::default() };
-    let mut it = messages(bytes, ReadMode::Recover)?;
+    let tail = bytes.get(bytes.len().saturating_sub(37)..).unwrap_or_default();
+    Ok(count(messages(bytes, ReadMode::Recover)?, is_finished(tail)))
+}
+
+/// [`summarize`] for a file, streamed.
+pub fn summarize_file(path: &Path) -> Result<RecordingSummary, PipelineError> {
+    let ctx = |e| PipelineError::io(format!("reading {}", path.display()), e);
+    let mut file = File::open(path).map_err(ctx)?;
+    let len = file.metadata().map_err(ctx)?.len();
+    let mut tail = Vec::new();
+    file.seek(SeekFrom::Start(len.saturating_sub(37))).map_err(ctx)?;
+    file.read_to_end(&mut tail).map_err(ctx)?;
+    Ok(count(open(path, ReadMode::Recover)?, is_finished(&tail)))
+}
+
+fn count<R: Read>(mut it: Messages<R>, finished: bool) -> RecordingSummary {
+    let mut s = RecordingSummary { finished, ..RecordingSummary::default() };
     for m in it.by_ref().flatten() {
         s.messages += 1;
         s.start_ns = Some(s.start_ns.map_or(m.log_ns, |t| t.min(m.log_ns)));
@@ -161,7 +186,7 @@ pub fn summarize(bytes: &[u8]) -> Result<RecordingSummary, PipelineError> {
         t.last_ns = t.last_ns.max(m.log_ns);
     }
     s.stopped_by = it.stopped_by().map(str::to_string);
-    Ok(s)
+    s
 }
 
 fn cloud_err(reason: impl Into<String>) -> PipelineError {

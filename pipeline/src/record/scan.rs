@@ -117,10 +117,23 @@ fn record(buf: &[u8], pos: usize) -> Result<Option<RawRecord<'_>>, PipelineError
     Ok(Some((op, body, end)))
 }
 
-/// Scans the data section of an MCAP held in memory.
-pub struct Scanner<'a> {
-    buf: &'a [u8],
-    pos: usize,
+/// Whether `tail` (the last 37 bytes or more of a file) ends like a finished MCAP: a footer
+/// record, then the magic.
+pub fn is_finished(tail: &[u8]) -> bool {
+    let n = tail.len();
+    n >= 37
+        && tail.get(n - 8..) == Some(&MAGIC[..])
+        && tail.get(n - 37) == Some(&OP_FOOTER)
+        && tail.get(n - 36..n - 28) == Some(&20u64.to_le_bytes()[..])
+}
+
+/// Scans the data section of an MCAP from any reader of known length (a file, or bytes in
+/// memory); memory use is one record (a chunk, 4 MiB by default) at a time.
+pub struct Scanner<R: Read> {
+    src: R,
+    /// Bytes consumed so far, and the total the source holds.
+    pos: u64,
+    len: u64,
     schemas: BTreeMap<u16, (String, String)>,
     channels: BTreeMap<u16, Channel>,
     pending: VecDeque<ScannedMessage>,
@@ -128,18 +141,46 @@ pub struct Scanner<'a> {
     failed: bool,
 }
 
-impl<'a> Scanner<'a> {
-    pub fn new(buf: &'a [u8]) -> Result<Self, PipelineError> {
-        match buf.get(..MAGIC.len()) {
-            Some(m) if m == MAGIC => {}
-            Some(_) => return Err(bad(0, "no MCAP magic")),
-            None => {
-                return Err(PipelineError::Truncated { format: "MCAP", what: "magic", need: 8, have: buf.len() as u64 })
-            }
+fn io_err(e: std::io::Error) -> PipelineError {
+    PipelineError::io("reading the recording", e)
+}
+
+/// Reads up to `buf.len()` bytes; fewer only at the end of the source.
+fn read_full<R: Read>(src: &mut R, buf: &mut [u8]) -> Result<usize, PipelineError> {
+    let mut n = 0;
+    while n < buf.len() {
+        match src.read(buf.get_mut(n..).unwrap_or_default()) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(io_err(e)),
+        }
+    }
+    Ok(n)
+}
+
+impl<'a> Scanner<&'a [u8]> {
+    /// Scans bytes held in memory.
+    pub fn from_bytes(buf: &'a [u8]) -> Result<Self, PipelineError> {
+        Self::new(buf, buf.len() as u64)
+    }
+}
+
+impl<R: Read> Scanner<R> {
+    /// `len` is the source's total size (a file's length): no record may claim more.
+    pub fn new(mut src: R, len: u64) -> Result<Self, PipelineError> {
+        let mut magic = [0u8; 8];
+        let n = read_full(&mut src, &mut magic)?;
+        if n < magic.len() {
+            return Err(PipelineError::Truncated { format: "MCAP", what: "magic", need: 8, have: n as u64 });
+        }
+        if &magic != MAGIC {
+            return Err(bad(0, "no MCAP magic"));
         }
         Ok(Self {
-            buf,
-            pos: MAGIC.len(),
+            src,
+            pos: MAGIC.len() as u64,
+            len,
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
             pending: VecDeque::new(),
@@ -148,13 +189,36 @@ impl<'a> Scanner<'a> {
         })
     }
 
-    /// Whether the file ends like a finished MCAP (footer record, then the magic).
-    pub fn is_finished(buf: &[u8]) -> bool {
-        let n = buf.len();
-        n >= 8 + 29 + 8
-            && buf.get(n - 8..) == Some(&MAGIC[..])
-            && buf.get(n - 37) == Some(&OP_FOOTER)
-            && buf.get(n - 36..n - 28) == Some(&20u64.to_le_bytes()[..])
+    /// The next top-level record: `None` at the exact end of the source.
+    fn read_record(&mut self) -> Result<Option<(u8, Vec<u8>, u64)>, PipelineError> {
+        let mut head = [0u8; 9];
+        let n = read_full(&mut self.src, &mut head)?;
+        if n == 0 {
+            return Ok(None);
+        }
+        if n < head.len() {
+            return Err(PipelineError::Truncated { format: "MCAP", what: "record header", need: 9, have: n as u64 });
+        }
+        let [op, l @ ..] = head;
+        let len = u64::from_le_bytes(l);
+        let base = self.pos + 9;
+        let have = self.len.saturating_sub(base);
+        if len > have {
+            return Err(PipelineError::Truncated { format: "MCAP", what: "record", need: len, have });
+        }
+        // grows with the bytes that actually arrive, never by the claimed length alone
+        let mut body = Vec::new();
+        (&mut self.src).take(len).read_to_end(&mut body).map_err(io_err)?;
+        if (body.len() as u64) < len {
+            return Err(PipelineError::Truncated {
+                format: "MCAP",
+                what: "record",
+                need: len,
+                have: body.len() as u64,
+            });
+        }
+        self.pos = base + len;
+        Ok(Some((op, body, base)))
     }
 
     /// The next message; `None` after the data-end record. A file that stops earlier is an
@@ -178,7 +242,7 @@ impl<'a> Scanner<'a> {
     }
 
     fn step(&mut self) -> Result<(), PipelineError> {
-        let Some((op, body, end)) = record(self.buf, self.pos)? else {
+        let Some((op, body, base)) = self.read_record()? else {
             return Err(PipelineError::Truncated {
                 format: "MCAP",
                 what: "data section (the file ends before its data-end record: not finished)",
@@ -186,12 +250,11 @@ impl<'a> Scanner<'a> {
                 have: 0,
             });
         };
-        let base = self.pos + 9;
-        self.pos = end;
+        let base = usize::try_from(base).unwrap_or(usize::MAX);
         match op {
             OP_DATA_END | OP_FOOTER => self.data_end = true,
-            OP_CHUNK => self.chunk(body, base)?,
-            _ => self.inner_record(op, body, base)?,
+            OP_CHUNK => self.chunk(&body, base)?,
+            _ => self.inner_record(op, &body, base)?,
         }
         Ok(())
     }
