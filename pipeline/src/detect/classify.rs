@@ -15,7 +15,7 @@ fn band(x: f64, lo: f64, hi: f64, soft: f64) -> f64 {
 }
 
 /// Clusters with fewer points are judged by their face share more leniently.
-const FACE_MIN_POINTS: usize = 150;
+const FACE_MIN_POINTS: usize = 300;
 
 /// Shoulders, hips or a pair of legs are at least this long over the floor (a pole, a door
 /// jamb or the corner of a box is not).

@@ -173,13 +173,15 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 }
 
 /// The largest plane among a cluster's voxel centres (RANSAC, then a least-squares refit),
-/// returned as the voxels on it, when it is larger than `min_length` x `min_width`.
+/// returned as the voxels on it, when it is larger than `min_length` x `min_width`. Horizontal
+/// planes lower than `keep_low_horizontal_m` are not candidates.
 pub fn peel_plane(
     grid: &Grid,
     cluster: &[u32],
     tolerance_m: f64,
     min_length_m: f64,
     min_width_m: f64,
+    keep_low_horizontal_m: f64,
     seed: u64,
 ) -> Option<(Vec<u32>, Vec<u32>)> {
     let pts: Vec<Vector3<f64>> =
@@ -210,6 +212,11 @@ pub fn peel_plane(
         }
         let normal = normal / len;
         let d = normal.dot(pa);
+        // A horizontal plane this low is more likely a person lying against the furniture
+        // than furniture: it is never peeled.
+        if normal.z.abs() > 0.9 && (d / normal.z).abs() < keep_low_horizontal_m {
+            continue;
+        }
         let count = pts.iter().step_by(stride).filter(|p| (normal.dot(p) - d).abs() < tolerance_m).count();
         if best.is_none_or(|(c, _, _)| count > c) {
             best = Some((count, normal, d));
@@ -258,4 +265,25 @@ pub fn peel_plane(
     let (eu, ew) = (umax - umin, wmax - wmin);
     let (long, short) = if eu >= ew { (eu, ew) } else { (ew, eu) };
     (long >= min_length_m && short >= min_width_m).then_some((on, off))
+}
+
+/// For a cluster that is mostly low (at least `min_low_share` of its voxels below `low_m`):
+/// the cluster without every voxel column that reaches above `low_m`. It separates a person
+/// lying against furniture (a row of seats, a bed's headboard) from it when no plane is large
+/// enough to peel. `None` when the cluster is not mostly low or nothing would change.
+pub fn drop_tall_columns(grid: &Grid, cluster: &[u32], low_m: f64, min_low_share: f64) -> Option<Vec<u32>> {
+    let centre = |v: u32| grid.voxels.get(v as usize);
+    let low = cluster.iter().filter(|&&v| centre(v).is_some_and(|c| c.centre.z < low_m)).count();
+    if (low as f64) < min_low_share * cluster.len() as f64 {
+        return None;
+    }
+    let tall: std::collections::HashSet<[i32; 2], BuildHasherDefault<KeyHasher>> = cluster
+        .iter()
+        .filter_map(|&v| centre(v))
+        .filter(|c| c.centre.z >= low_m)
+        .map(|c| [c.key[0], c.key[1]])
+        .collect();
+    let rest: Vec<u32> =
+        cluster.iter().copied().filter(|&v| centre(v).is_some_and(|c| !tall.contains(&[c.key[0], c.key[1]]))).collect();
+    (!rest.is_empty() && rest.len() < cluster.len()).then_some(rest)
 }

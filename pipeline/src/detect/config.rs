@@ -92,7 +92,7 @@ impl Default for DetectConfig {
             lying_max_width_m: 0.8,
             max_bottom_m: 1.2,
             face_tolerance_m: 0.04,
-            max_face_share: 0.6,
+            max_face_share: 0.5,
             max_planarity: 0.25,
             min_thickness_m: 0.02,
             min_score: 0.5,

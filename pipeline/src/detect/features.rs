@@ -18,7 +18,8 @@ pub struct ClusterFeatures {
     /// Lowest and highest point above the floor.
     pub bottom_m: f64,
     pub top_m: f64,
-    /// Share of the points within the face tolerance of a side or the top of the box.
+    /// Share of the points within the face tolerance of a side of the box (not the top: the
+    /// field of view cuts people seen up close flat at the top).
     pub face_share: f64,
     /// Share of the points within the face tolerance of the top alone (a box's flat top).
     pub top_share: f64,
@@ -95,7 +96,8 @@ pub fn features(
     let size = hi - lo;
     let mid = (lo + hi) / 2.0;
     let centre = Vector3::new(c * mid.x - s * mid.y, s * mid.x + c * mid.y, mid.z);
-    // Points on a side or the top (the bottom is cut by the floor band), against faces placed
+    // Points on a side (the top may be the field of view's edge, the bottom is cut by the floor
+    // band), against faces placed
     // at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
     // outside it, and the extremes would move the faces off the bulk.
     let stride = (raw.len() / 600).max(1);
@@ -110,12 +112,7 @@ pub fn features(
     let on = sample
         .iter()
         .filter(|q| {
-            let d = (q.x - x0)
-                .abs()
-                .min((x1 - q.x).abs())
-                .min((q.y - y0).abs())
-                .min((y1 - q.y).abs())
-                .min((z1 - q.z).abs());
+            let d = (q.x - x0).abs().min((x1 - q.x).abs()).min((q.y - y0).abs()).min((y1 - q.y).abs());
             d < face_tolerance_m
         })
         .count();

@@ -2,12 +2,19 @@
 //! clusters, each cluster scored as a person.
 
 use super::classify::{score, too_big};
-use super::cluster::{peel_plane, Grid};
+use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel};
 use crate::PipelineError;
 use nalgebra::Vector3;
+
+/// A cluster whose top is this close to the ceiling cut touches the ceiling.
+const CEILING_CONTACT_M: f64 = 0.05;
+
+/// A cluster with this share of its voxels below the lying height is mostly low (a person
+/// lying against something taller).
+const LOW_SHARE: f64 = 0.6;
 
 /// Geometric person detector (see the module docs). Holds no state between windows beyond
 /// scratch space.
@@ -108,7 +115,11 @@ impl Detector for GeometricDetector {
             let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m) else {
                 continue;
             };
-            let (pose, s) = score(&f, cfg);
+            let (pose, mut s) = score(&f, cfg);
+            // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
+            if f.top_m > top - CEILING_CONTACT_M {
+                s = 0.0;
+            }
             if self.keep_cluster_points {
                 self.last_cluster_points.push(cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect());
             }
@@ -137,15 +148,21 @@ impl Detector for GeometricDetector {
             if !split {
                 continue;
             }
-            let peeled = peel_plane(
-                &grid,
-                &cluster,
-                cfg.plane_tolerance_m,
-                cfg.plane_min_length_m,
-                cfg.plane_min_width_m,
-                depth as u64,
-            );
-            if let Some((_, rest)) = peeled {
+            // A mostly low cluster is a person lying against something taller more often than
+            // a plane: cut the tall columns first; otherwise peel the largest plane.
+            let rest = drop_tall_columns(&grid, &cluster, cfg.lying_height_m[1], LOW_SHARE).or_else(|| {
+                peel_plane(
+                    &grid,
+                    &cluster,
+                    cfg.plane_tolerance_m,
+                    cfg.plane_min_length_m,
+                    cfg.plane_min_width_m,
+                    cfg.lying_height_m[1],
+                    depth as u64,
+                )
+                .map(|(_, rest)| rest)
+            });
+            if let Some(rest) = rest {
                 stack.extend(grid.components(&rest).into_iter().map(|c| (c, depth + 1)));
             }
         }
