@@ -5,9 +5,9 @@
 //!
 //! Run with `cargo bench -p starc-pipeline --bench record`. Prints per configuration: wall time,
 //! messages/s, payload MB/s (CDR bytes handed to the writer), file MB/s and file size, and the
-//! part spent in CDR encoding alone; then the read-back rate. Files go to the temp directory
-//! (page cache); `none+sync` is `sync_chunks: true`, an fdatasync per chunk: what surviving a
-//! power cut costs on this disk. With `STARC_BENCH_PY=1` it also times the PyPI `mcap` writer
+//! part spent in CDR encoding alone; then the read-back rate, from memory and streamed from the
+//! file. Files go to the temp directory (page cache); `none+sync` is `sync_chunks: true`, an
+//! fdatasync per chunk: what surviving a power cut costs on this disk. With `STARC_BENCH_PY=1` it also times the PyPI `mcap` writer
 //! writing the very same payloads (tests/peers/mcap_write_bench.py, run from `.venv/bin/python`).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -158,6 +158,16 @@ fn run_mix(label: &str, scans: &[PointCloud]) {
         assert_eq!(n, messages);
         println!(
             "read  {name:<9}: {:7.1} ms = {:8.0} msg/s, {:6.0} MB/s of payload (scan + typed decode, from memory)",
+            s * 1e3,
+            n as f64 / s,
+            payload as f64 / 1e6 / s
+        );
+        let t = Instant::now();
+        let n = reader::open(&path, ReadMode::Strict).unwrap().map(|m| m.unwrap().decode().unwrap()).count() as u64;
+        let s = t.elapsed().as_secs_f64();
+        assert_eq!(n, messages);
+        println!(
+            "stream {name:<8}: {:7.1} ms = {:8.0} msg/s, {:6.0} MB/s of payload (scan + typed decode, file streamed)",
             s * 1e3,
             n as f64 / s,
             payload as f64 / 1e6 / s
