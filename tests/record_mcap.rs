@@ -1,7 +1,7 @@
 //! MCAP recordings (starc_pipeline::record) end to end: every message type written, read back
 //! by our reader and decoded by real ROS 2 tooling (PyPI `mcap` + `mcap-ros2-support`, and
 //! `rosbags`, run from `.venv/bin/python` by tests/peers/mcap_check.py); a writer killed by
-//! `abort()` mid-recording, then read back as far as the file goes; damaged files read without
+//! SIGKILL mid-recording, then read back as far as the file goes; damaged files read without
 //! a panic.
 //!
 //! The peers are required: a missing peer fails these tests (install with
@@ -254,14 +254,14 @@ fn real_peers_decode_every_message() {
     }
 }
 
-const CHILD_ENV: &str = "STARC_RECORD_ABORT_CHILD";
+const CHILD_ENV: &str = "STARC_RECORD_KILLED_CHILD";
 
 /// Not a test of its own: the process `a_writer_killed_mid_recording_keeps_closed_chunks`
-/// starts and lets abort. Writes 200 Hz IMU and 10 Hz scans with 100 ms chunks, prints what
-/// was committed, then aborts without finishing.
+/// starts and lets die. Writes 200 Hz IMU and 10 Hz scans with 100 ms chunks, prints what
+/// was committed, then kills itself with SIGKILL (no destructor, no flush, no core dump).
 #[test]
 #[ignore = "child process of a_writer_killed_mid_recording_keeps_closed_chunks"]
-fn abort_child() {
+fn killed_child() {
     let Some(path) = std::env::var_os(CHILD_ENV) else {
         return;
     };
@@ -276,21 +276,26 @@ fn abort_child() {
     }
     let s = rec.stats();
     println!("committed={} written={} chunks={}", s.committed_messages, s.messages, s.chunks);
-    std::process::abort();
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    // SAFETY: kill(2) on our own pid; nothing after it runs.
+    unsafe { libc::kill(libc::getpid(), libc::SIGKILL) };
+    unreachable!("SIGKILL returned");
 }
 
 #[test]
 fn a_writer_killed_mid_recording_keeps_closed_chunks() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("aborted.mcap");
+    let path = dir.path().join("killed.mcap");
     let out = Command::new(std::env::current_exe().unwrap())
-        .args(["abort_child", "--exact", "--ignored", "--nocapture", "--test-threads=1"])
+        .args(["killed_child", "--exact", "--ignored", "--nocapture", "--test-threads=1"])
         .env(CHILD_ENV, &path)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(!out.status.success(), "the child should have aborted: {stdout}");
-    // the harness prints "test abort_child ... " on the same line
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(out.status.signal(), Some(libc::SIGKILL), "the child should have been killed: {stdout}");
+    // the harness prints "test killed_child ... " on the same line
     let line = stdout.lines().find_map(|l| l.find("committed=").map(|i| &l[i..])).unwrap_or_else(|| panic!("{stdout}"));
     let field =
         |name: &str| -> u64 { line.split_whitespace().find_map(|kv| kv.strip_prefix(name)).unwrap().parse().unwrap() };
