@@ -416,7 +416,8 @@ impl Cdr for ColorRgba {
 }
 
 /// `visualization_msgs/Marker`, limited to what a shape marker needs: the texture, UV and mesh
-/// fields are always written empty and must be empty on read (we never record them).
+/// fields are always written empty; on read they are decoded (so the payload is checked) and
+/// dropped.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Marker {
     pub header: Header,

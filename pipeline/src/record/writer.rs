@@ -256,7 +256,7 @@ impl Recorder {
         self.write(Topic::Points.name(), start.ns, &msg)
     }
 
-    /// One IMU sample on `/robot/imu` (orientation unknown: covariance[0] = -1, per REP 145).
+    /// One IMU sample on `/robot/imu` (orientation unknown: `orientation_covariance[0] = -1`, per REP 145).
     pub fn imu(&mut self, stamp: Stamp, gyro_rad_s: [f64; 3], acc_m_s2: [f64; 3]) -> Result<(), PipelineError> {
         let mut not_given = [0.0; 9];
         not_given[0] = -1.0;
