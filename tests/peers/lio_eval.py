@@ -99,6 +99,43 @@ def score(gt, est):
     return out, ref, est
 
 
+def plot(a, ref, est_ours, ours_score, est_kiss, kiss_score):
+    """Top: the path seen from above; bottom: the position error over time (log scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 7.0), gridspec_kw={"height_ratios": [3, 2]})
+    top.plot(ref.positions_xyz[:, 0], ref.positions_xyz[:, 1], "k-", lw=2.5, label="ground truth")
+    top.plot(est_ours.positions_xyz[:, 0], est_ours.positions_xyz[:, 1], "r-", lw=1.2,
+             label=f"starc lio (APE {ours_score['ape_rmse_m'] * 100:.1f} cm)")
+    top.plot(est_kiss.positions_xyz[:, 0], est_kiss.positions_xyz[:, 1], "b--", lw=1.0,
+             label=f"KISS-ICP (APE {kiss_score['ape_rmse_m'] * 100:.1f} cm)")
+    # Equal axes, but never thinner than 3 m: a straight path would otherwise be a sliver.
+    xs = np.concatenate([ref.positions_xyz[:, 0], est_ours.positions_xyz[:, 0]])
+    ys = np.concatenate([ref.positions_xyz[:, 1], est_ours.positions_xyz[:, 1]])
+    cx, cy = (xs.max() + xs.min()) / 2, (ys.max() + ys.min()) / 2
+    half = max(xs.max() - xs.min(), ys.max() - ys.min(), 3.0) / 2 + 0.5
+    top.set_xlim(cx - half, cx + half)
+    top.set_ylim(cy - half, cy + half)
+    top.set_aspect("equal")
+    top.set_xlabel("x (m)")
+    top.set_ylabel("y (m)")
+    top.set_title(a.title)
+    top.legend(loc="best", fontsize=8)
+    for est, style, name in ((est_ours, "r-", "starc lio"), (est_kiss, "b--", "KISS-ICP")):
+        r, e = sync.associate_trajectories(ref, est, max_diff=0.006)
+        err = np.linalg.norm(r.positions_xyz - e.positions_xyz, axis=1)
+        bottom.semilogy(e.timestamps - ref.timestamps[0], np.maximum(err, 1e-4), style, lw=1.0, label=name)
+    bottom.set_xlabel("time (s)")
+    bottom.set_ylabel("position error (m)")
+    bottom.grid(True, which="both", alpha=0.3)
+    bottom.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(a.plot, dpi=80)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--gt", required=True)
@@ -137,24 +174,7 @@ def main():
                          time_ms_median=float(np.median(times_ms)), time_ms_p99=float(np.percentile(times_ms, 99))),
     }
     if a.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots(figsize=(6, 5))
-        ax.plot(ref_ours.positions_xyz[:, 0], ref_ours.positions_xyz[:, 1], "k-", lw=2.5, label="ground truth")
-        ax.plot(est_ours.positions_xyz[:, 0], est_ours.positions_xyz[:, 1], "r-", lw=1.2,
-                label=f"starc lio (APE {ours_score['ape_rmse_m'] * 100:.1f} cm)")
-        ax.plot(est_kiss.positions_xyz[:, 0], est_kiss.positions_xyz[:, 1], "b--", lw=1.2,
-                label=f"KISS-ICP (APE {kiss_score['ape_rmse_m'] * 100:.1f} cm)")
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_title(a.title)
-        ax.legend(loc="best", fontsize=8)
-        fig.tight_layout()
-        fig.savefig(a.plot, dpi=90)
+        plot(a, ref_ours, est_ours, ours_score, est_kiss, kiss_score)
     print(json.dumps(result))
 
 
