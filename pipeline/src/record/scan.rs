@@ -25,6 +25,10 @@ const MAX_LZ4_RATIO: u64 = 256;
 /// No chunk we write comes near this; a larger claim is refused before allocating.
 pub const MAX_CHUNK_BYTES: u64 = 1 << 30;
 
+/// CRC-32 as MCAP uses it (zlib's), slice-by-16: the byte-wise table made CRC checks half the
+/// read time.
+static CHUNK_CRC: crc::Crc<u32, crc::Table<16>> = crc::Crc::<u32, crc::Table<16>>::new(&crc::CRC_32_ISO_HDLC);
+
 /// One message with its channel's description.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScannedMessage {
@@ -206,8 +210,8 @@ impl<R: Read> Scanner<R> {
         if len > have {
             return Err(PipelineError::Truncated { format: "MCAP", what: "record", need: len, have });
         }
-        // grows with the bytes that actually arrive, never by the claimed length alone
-        let mut body = Vec::new();
+        // `len` is within what the source holds (checked above), so reserving it is bounded
+        let mut body = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
         (&mut self.src).take(len).read_to_end(&mut body).map_err(io_err)?;
         if (body.len() as u64) < len {
             return Err(PipelineError::Truncated {
@@ -351,7 +355,7 @@ impl<R: Read> Scanner<R> {
             }
         };
         if crc != 0 {
-            let calculated = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&data);
+            let calculated = CHUNK_CRC.checksum(&data);
             if calculated != crc {
                 return Err(bad(at, format!("chunk CRC {calculated:08x}, header says {crc:08x}")));
             }
