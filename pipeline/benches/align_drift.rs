@@ -2,14 +2,17 @@
 //! one registration, against the same with periodic re-registration and bounded correction.
 //!
 //! `cargo bench -p starc-pipeline --bench align_drift` (release). Runs the simulator (default
-//! `tactical`, 30 s, seed 1), the LIO on the rig's Avia (points and internal IMU, decoded from the
-//! capture), registers 2 s windows of the rig's scans (placed by the LIO's poses) against the
+//! `office`, 60 s, seed 1), the LIO on the rig's Avia (points and internal IMU, decoded from the
+//! capture), registers windows of the rig's scans (placed by the LIO's poses) against the
 //! robot's map (robot scans placed by the robot's true poses, reduced to 5 cm), renders at 30 Hz
 //! and compares both world poses with the rig's true pose. Writes `align_drift.csv` and
 //! `align_drift.svg` into STARC_ALIGN_OUT (default: target/align_drift/) and prints a summary.
 //!
-//! Environment: STARC_DRIFT_SIM=`scenario:duration_s` (default `tactical:30`),
-//! STARC_DRIFT_PERIOD_S (re-registration period, default 2), STARC_DRIFT_WINDOW_S (default 2).
+//! Environment: STARC_DRIFT_SIM=`scenario:duration_s` (default `office:60`, the benches' own
+//! scenario), STARC_DRIFT_PERIOD_S (re-registration period, default 2), STARC_DRIFT_WINDOW_S
+//! (window of a re-registration, default 4), STARC_DRIFT_FIRST_WINDOW_S (of the first, default 10),
+//! STARC_DRIFT_GUESS_M / _DEG (how far the first registration's guess is off the truth, default
+//! 0.3 m and 5 deg), STARC_DRIFT_FIRST_SEARCH=1 (the first registration with the seed search).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "align_sim/mod.rs"]
@@ -55,11 +58,13 @@ struct Row {
 }
 
 fn main() {
-    let spec = std::env::var("STARC_DRIFT_SIM").unwrap_or_else(|_| "tactical:30".into());
+    let spec = std::env::var("STARC_DRIFT_SIM").unwrap_or_else(|_| "office:60".into());
     let (scenario, duration) = spec.split_once(':').unwrap();
     let duration_s: f64 = duration.parse().unwrap();
     let period_ns = (env_f64("STARC_DRIFT_PERIOD_S", 2.0) * 1e9) as u64;
-    let window_ns = (env_f64("STARC_DRIFT_WINDOW_S", 2.0) * 1e9) as u64;
+    let window_ns = (env_f64("STARC_DRIFT_WINDOW_S", 4.0) * 1e9) as u64;
+    // The first registration has no prior: a longer window (the responder looks around).
+    let first_window_ns = (env_f64("STARC_DRIFT_FIRST_WINDOW_S", 10.0) * 1e9) as u64;
     let out_dir = std::env::var_os("STARC_ALIGN_OUT")
         .map_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/align_drift"), PathBuf::from);
     std::fs::create_dir_all(&out_dir).unwrap();
@@ -70,8 +75,17 @@ fn main() {
         0.05,
     );
     let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
-    // Re-registration starts from the current world pose: one attempt, no seed search.
-    let tracker = Aligner::new(&target, AlignConfig { reseed_yaw_step_deg: 0.0, ..AlignConfig::default() }).unwrap();
+    // Re-registration starts from the current world pose: one attempt, no seed search, and no
+    // NDT levels coarser than the room (8 and 4 m cells blur an office into false minima).
+    let tracking = AlignConfig {
+        reseed_yaw_step_deg: 0.0,
+        ndt_resolutions_m: vec![2.0, 1.0],
+        seed_levels: 1,
+        ..AlignConfig::default()
+    };
+    let tracker = Aligner::new(&target, tracking).unwrap();
+    let first_search = std::env::var_os("STARC_DRIFT_FIRST_SEARCH").is_some();
+    let (guess_m, guess_deg) = (env_f64("STARC_DRIFT_GUESS_M", 0.3), env_f64("STARC_DRIFT_GUESS_DEG", 5.0));
     println!(
         "{scenario} {duration_s} s: robot map {} points; rig {} scans, {} IMU samples",
         target.len(),
@@ -114,18 +128,25 @@ fn main() {
         let now = o.end_ns;
         let Some((first, _)) = odom.span_ns() else { continue };
         let mut event = String::new();
-        if now >= first + window_ns && now >= next_registration {
-            let src = window(&sim.fpv.scans, &odom, now, window_ns);
+        let aligned = corrected.correction().is_some();
+        let w_ns = if aligned { window_ns } else { first_window_ns };
+        if now >= first + w_ns && now >= next_registration {
+            let src = window(&sim.fpv.scans, &odom, now, w_ns);
             let truth = align_sim::truth_at(&sim.fpv_truth, now);
             let report = match corrected.world_pose(now).ok().flatten() {
-                // First registration: the guess is the truth off by 1 m and 20 deg (the seed search).
-                None => aligner.align(
-                    &src,
-                    &(Isometry3::from_parts(
-                        Translation3::new(0.8, -0.6, 0.0),
-                        UnitQuaternion::from_euler_angles(0.0, 0.0, 20f64.to_radians()),
-                    ) * truth),
-                ),
+                // First registration: a hand-off guess, the truth off by STARC_DRIFT_GUESS_M and
+                // _DEG (the seed search only with STARC_DRIFT_FIRST_SEARCH).
+                None => {
+                    let guess = Isometry3::from_parts(
+                        Translation3::new(guess_m * 0.8, -guess_m * 0.6, 0.0),
+                        UnitQuaternion::from_euler_angles(0.0, 0.0, guess_deg.to_radians()),
+                    ) * truth;
+                    if first_search {
+                        aligner.align(&src, &guess)
+                    } else {
+                        tracker.align(&src, &guess)
+                    }
+                }
                 Some(guess) => tracker.align(&src, &guess),
             };
             align_ms.push(report.total_ms);
@@ -135,11 +156,12 @@ fn main() {
                 if lio_only.correction().is_none() {
                     lio_only.push_registration(now, report.pose).unwrap();
                 }
-                corrected.push_registration(now, report.pose).unwrap();
-                event = format!("accepted ({:.1} cm {:.2} deg off the truth)", e_m * 100.0, e_deg);
+                let outcome = corrected.push_registration(now, report.pose).unwrap();
+                event = format!("accepted, {outcome:?} ({:.1} cm {:.2} deg off the truth)", e_m * 100.0, e_deg);
             } else {
                 rejected += 1;
                 event = format!("rejected: {}", report.failure.unwrap_or_default());
+                println!("  t {:.1} s: {event}", (now - sim.robot_truth[0].0) as f64 * 1e-9);
             }
             next_registration = now + period_ns;
         }
@@ -192,9 +214,11 @@ fn main() {
     let (cd_rms, _, cd_end) = stat(&|r| r.corrected_deg);
     // The largest frame-to-frame change of the corrected pose beyond the rig's own motion.
     println!(
-        "{} frames at 30 Hz over {:.1} s; registrations: {accepted} accepted, {rejected} rejected; align median {:.1} ms",
+        "{} frames at 30 Hz over {:.1} s; registrations: {accepted} accepted ({} refused by the world pose as too far, {} snapped), {rejected} rejected by the aligner; align median {:.1} ms",
         rows.len(),
         rows.last().map_or(0.0, |r| r.t_s) - rows.first().map_or(0.0, |r| r.t_s),
+        corrected.refused,
+        corrected.snaps,
         {
             align_ms.sort_by(f64::total_cmp);
             align_ms.get(align_ms.len() / 2).copied().unwrap_or(f64::NAN)

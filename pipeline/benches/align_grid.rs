@@ -134,7 +134,11 @@ fn run_peers(
         .env("OMP_NUM_THREADS", "1")
         .output()
         .unwrap_or_else(|e| panic!("{}: {e}", python.display()));
-    let _ = std::fs::remove_dir_all(&dir);
+    if std::env::var_os("STARC_ALIGN_KEEP_PEER_DIR").is_some() {
+        println!("peer inputs kept in {}", dir.display());
+    } else {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     assert!(out.status.success(), "align_peers.py: {}", String::from_utf8_lossy(&out.stderr));
     let mut peers: Vec<(String, f64, Vec<Outcome>)> = Vec::new();
     for line in String::from_utf8_lossy(&out.stdout).lines() {
@@ -231,6 +235,14 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
             s.time_median_ms / mine.time_median_ms,
             s.cpu_median_ms / mine.cpu_median_ms
         ));
+    }
+    // The local subset, where plain ICP is expected to converge: |yaw| <= 15 deg, shift <= 0.75 m.
+    let local: Vec<usize> = (0..starts.len()).filter(|k| (k % 24).abs_diff(12) <= 1 && k / 24 <= 1).collect();
+    println!("local starts only ({} trials: |yaw| <= 15 deg, shift <= 0.75 m):", local.len());
+    let pick = |o: &[Outcome]| local.iter().filter_map(|&k| o.get(k).copied()).collect::<Vec<_>>();
+    summarize("STARC", &pick(&ours));
+    for (peer, _, outcomes) in &peers {
+        summarize(peer, &pick(outcomes));
     }
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!("load average at the end: {}", load.split_whitespace().take(3).collect::<Vec<_>>().join(" "));

@@ -76,7 +76,7 @@ fn unaligned_until_the_first_registration_then_composes() {
     // The robot's world: the rig's odometry frame sits at (5, 2, 0.3), turned 30 deg.
     let w_t_o = pose(5.0, 2.0, 0.3, 30.0);
     let t0 = 1_000_000_000;
-    w.push_registration(t0, w_t_o * rig_odometry(t0)).unwrap();
+    assert_eq!(w.push_registration(t0, w_t_o * rig_odometry(t0)).unwrap(), RegistrationOutcome::Initial);
     assert_eq!(w.state(), WorldPoseState::Aligned);
     for k in 100..=200u64 {
         let t = k * 10_000_000 + 5_000_000 * u64::from(k < 200);
@@ -100,8 +100,8 @@ fn drift_correction_slides_in_bounded_steps_and_snaps_when_far() {
     w.push_registration(500_000_000, w_t_o * rig_odometry(500_000_000)).unwrap();
     // The LIO drifted: the new registration says the odometry frame is 12 cm and 1.5 deg off.
     let drifted = w_t_o * pose(0.08, -0.09, 0.0, 1.5);
-    w.push_registration(900_000_000, drifted * rig_odometry(900_000_000)).unwrap();
-    assert_eq!(w.state(), WorldPoseState::Correcting);
+    let outcome = w.push_registration(900_000_000, drifted * rig_odometry(900_000_000)).unwrap();
+    assert_eq!((outcome, w.state()), (RegistrationOutcome::Sliding, WorldPoseState::Correcting));
     let now = 1_000_000_000;
     // Seen at the rig, the correction is the 1.5 deg plus what that turn does to the rig's offset.
     let odo = rig_odometry(now);
@@ -126,10 +126,14 @@ fn drift_correction_slides_in_bounded_steps_and_snaps_when_far() {
     assert_eq!(frames, expected);
     assert!(close(&w.correction().unwrap(), &drifted, 1e-9));
     assert_eq!(w.snaps, 0);
-    // A 3 m re-localisation snaps.
-    let far = drifted * pose(3.0, 0.0, 0.0, 0.0);
-    w.push_registration(950_000_000, far * rig_odometry(950_000_000)).unwrap();
-    assert_eq!((w.state(), w.snaps), (WorldPoseState::Aligned, 1));
+    // A 2 m re-localisation snaps; a 5 m one is refused as a false match.
+    let refused = drifted * pose(5.0, 0.0, 0.0, 0.0);
+    let outcome = w.push_registration(950_000_000, refused * rig_odometry(950_000_000)).unwrap();
+    assert_eq!((outcome, w.refused), (RegistrationOutcome::Refused, 1));
+    assert!(close(&w.correction().unwrap(), &drifted, 1e-9));
+    let far = drifted * pose(2.0, 0.0, 0.0, 0.0);
+    let outcome = w.push_registration(950_000_000, far * rig_odometry(950_000_000)).unwrap();
+    assert_eq!((outcome, w.state(), w.snaps), (RegistrationOutcome::Snapped, WorldPoseState::Aligned, 1));
     let p = w.world_pose(now).unwrap().unwrap();
     assert!((p.translation.vector - (far * rig_odometry(now)).translation.vector).norm() < 1e-9);
 }

@@ -30,11 +30,24 @@ pub struct WorldPoseConfig {
     /// sliding there would show a wrong overlay for seconds.
     pub snap_m: f64,
     pub snap_deg: f64,
+    /// A registration farther than this from the pose in use is refused: LIO does not drift
+    /// metres in one re-registration period, so such a result is a false match (a symmetric
+    /// room, a corridor), not a correction.
+    pub refuse_m: f64,
+    pub refuse_deg: f64,
 }
 
 impl Default for WorldPoseConfig {
     fn default() -> Self {
-        Self { buffer_len: 2000, max_step_m: 0.005, max_step_deg: 0.1, snap_m: 1.0, snap_deg: 10.0 }
+        Self {
+            buffer_len: 2000,
+            max_step_m: 0.005,
+            max_step_deg: 0.1,
+            snap_m: 1.0,
+            snap_deg: 10.0,
+            refuse_m: 3.0,
+            refuse_deg: 30.0,
+        }
     }
 }
 
@@ -42,7 +55,7 @@ impl WorldPoseConfig {
     pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
         let c: Self = toml::from_str(text)
             .map_err(|e| PipelineError::BadFile { format: "world pose config", reason: e.to_string() })?;
-        let positive = [c.max_step_m, c.max_step_deg, c.snap_m, c.snap_deg];
+        let positive = [c.max_step_m, c.max_step_deg, c.snap_m, c.snap_deg, c.refuse_m, c.refuse_deg];
         if c.buffer_len < 2 || positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(PipelineError::BadFile {
                 format: "world pose config",
@@ -64,6 +77,19 @@ pub enum WorldPoseState {
     Correcting,
 }
 
+/// What a registration did to the world pose.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum RegistrationOutcome {
+    /// The first one: applied at once.
+    Initial,
+    /// Within the snap limits: the correction slides to it frame by frame.
+    Sliding,
+    /// Past the snap limits (a re-localisation): applied at once.
+    Snapped,
+    /// Past the refuse limits: ignored as a false match.
+    Refused,
+}
+
 /// What one frame's step did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct CorrectionStep {
@@ -82,9 +108,10 @@ pub struct WorldPose {
     odom: PoseBuffer,
     applied: Option<Isometry3<f64>>,
     target: Option<Isometry3<f64>>,
-    /// Registrations taken, and how many of them snapped.
+    /// Registrations taken, how many of them snapped, how many were refused.
     pub registrations: u32,
     pub snaps: u32,
+    pub refused: u32,
 }
 
 impl WorldPose {
@@ -96,6 +123,7 @@ impl WorldPose {
             target: None,
             registrations: 0,
             snaps: 0,
+            refused: 0,
         }
     }
 
@@ -118,26 +146,44 @@ impl WorldPose {
 
     /// An accepted registration: the rig's LiDAR pose in the world at `t_ns` (the time the
     /// registered window refers to, inside the odometry buffer). The first one is applied at once;
-    /// later ones become the target the correction slides to (or snaps to, past the snap limits).
-    pub fn push_registration(&mut self, t_ns: u64, w_t_fpv: Isometry3<f64>) -> Result<(), PipelineError> {
+    /// later ones become the target the correction slides to, or snap past the snap limits, or
+    /// are refused past the refuse limits (measured at the rig's latest odometry pose).
+    pub fn push_registration(
+        &mut self,
+        t_ns: u64,
+        w_t_fpv: Isometry3<f64>,
+    ) -> Result<RegistrationOutcome, PipelineError> {
         let o_t_fpv = self.odom.at(t_ns)?;
         let w_t_o = w_t_fpv * o_t_fpv.inverse();
-        self.registrations += 1;
-        let snap = match (&self.applied, self.odom.latest()) {
-            (None, _) | (_, None) => true,
+        let c = &self.config;
+        let outcome = match (&self.applied, self.odom.latest()) {
+            (None, _) | (_, None) => RegistrationOutcome::Initial,
             (Some(applied), Some((_, now))) => {
                 let (m, deg) = at_rig(applied, &w_t_o, &now);
-                m > self.config.snap_m || deg > self.config.snap_deg
+                if m > c.refuse_m || deg > c.refuse_deg {
+                    RegistrationOutcome::Refused
+                } else if m > c.snap_m || deg > c.snap_deg {
+                    RegistrationOutcome::Snapped
+                } else {
+                    RegistrationOutcome::Sliding
+                }
             }
         };
-        if snap {
-            if self.applied.is_some() {
-                self.snaps += 1;
+        match outcome {
+            RegistrationOutcome::Refused => {
+                self.refused += 1;
+                return Ok(outcome);
             }
-            self.applied = Some(w_t_o);
+            RegistrationOutcome::Initial => self.applied = Some(w_t_o),
+            RegistrationOutcome::Snapped => {
+                self.snaps += 1;
+                self.applied = Some(w_t_o);
+            }
+            RegistrationOutcome::Sliding => {}
         }
+        self.registrations += 1;
         self.target = Some(w_t_o);
-        Ok(())
+        Ok(outcome)
     }
 
     /// Moves the correction in use one rendered frame towards the latest registration, by at most
