@@ -24,6 +24,8 @@ const OP_DATA_END: u8 = 0x0F;
 const MAX_LZ4_RATIO: u64 = 256;
 /// No chunk we write comes near this; a larger claim is refused before allocating.
 pub const MAX_CHUNK_BYTES: u64 = 1 << 30;
+/// Room reserved up front for a decompressed chunk (default chunks are 4 MiB).
+const PREALLOCATE_MAX: u64 = 16 << 20;
 
 /// CRC-32 as MCAP uses it (zlib's), slice-by-16: the byte-wise table made CRC checks half the
 /// read time.
@@ -339,7 +341,8 @@ impl<R: Read> Scanner<R> {
                         format!("chunk claims {uncompressed_size} bytes from {records_len} compressed"),
                     ));
                 }
-                let mut out = Vec::with_capacity(uncompressed_size as usize);
+                // grows with what actually decompresses; the claim only bounds it
+                let mut out = Vec::with_capacity(uncompressed_size.min(PREALLOCATE_MAX) as usize);
                 let dec = lz4::Decoder::new(records).map_err(|e| bad(at, format!("lz4: {e}")))?;
                 dec.take(uncompressed_size).read_to_end(&mut out).map_err(|e| bad(at, format!("lz4: {e}")))?;
                 if out.len() as u64 != uncompressed_size {
@@ -360,17 +363,13 @@ impl<R: Read> Scanner<R> {
                 return Err(bad(at, format!("chunk CRC {calculated:08x}, header says {crc:08x}")));
             }
         }
+        // Messages queue behind any still pending, so file order is kept.
         let mut pos = 0;
-        let mut out = VecDeque::new();
-        std::mem::swap(&mut out, &mut self.pending);
         while let Some((op, body, end)) = record(&data, pos).map_err(|e| bad(at, format!("inside a chunk: {e}")))? {
             // offsets inside a compressed chunk do not map to the file; report the chunk's
             self.inner_record(op, body, at)?;
             pos = end;
         }
-        // keep messages of earlier records (none in practice) ahead of this chunk's
-        out.append(&mut self.pending);
-        self.pending = out;
         Ok(())
     }
 }
