@@ -38,6 +38,31 @@ pub struct ClusterFeatures {
 /// half a voxel inside a face).
 const EDGE_TOLERANCE_M: f64 = 0.06;
 
+/// Variance ratio of the footprint's axes above which its major axis sets the heading.
+const ELONGATED_RATIO: f64 = 4.0;
+
+/// Heading of the footprint's major axis and the ratio of its variances (major / minor).
+fn major_axis(centres: &[Vector3<f64>]) -> Option<(f64, f64)> {
+    let n = centres.len() as f64;
+    if centres.len() < 3 {
+        return None;
+    }
+    let (mx, my) = (centres.iter().map(|p| p.x).sum::<f64>() / n, centres.iter().map(|p| p.y).sum::<f64>() / n);
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for p in centres {
+        let (dx, dy) = (p.x - mx, p.y - my);
+        sxx += dx * dx;
+        syy += dy * dy;
+        sxy += dx * dy;
+    }
+    // Eigenvalues of the 2x2 covariance, and the major axis' direction.
+    let half_trace = (sxx + syy) / 2.0;
+    let disc = (((sxx - syy) / 2.0).powi(2) + sxy * sxy).sqrt();
+    let (major, minor) = (half_trace + disc, half_trace - disc);
+    let yaw = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    (minor > 1e-12).then_some((yaw, major / minor)).or(Some((yaw, f64::MAX))).filter(|_| major > 0.0)
+}
+
 /// `points` maps a window index to (x, y, height above floor).
 pub fn features(
     grid: &Grid,
@@ -81,25 +106,44 @@ pub fn features(
     let coarse = (0..30).map(|k| f64::from(k).to_radians() * 3.0);
     let best = coarse.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(0.0);
     let fine = (-6..=6).map(|k| best + f64::from(k).to_radians() * 0.5);
-    let yaw = fine.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(best);
-
-    // Box of the raw points in that frame.
+    let edge_yaw = fine.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(best);
+    // The box: in the frame of the edges, or of the footprint's major axis when that is
+    // elongated (a body lying, a walker mid-stride: the edges of a rounded outline do not give
+    // a heading reliably) and the smaller footprint.
+    let frame_box = |yaw: f64| {
+        let (s, c) = yaw.sin_cos();
+        let mut lo = Vector3::repeat(f64::MAX);
+        let mut hi = Vector3::repeat(f64::MIN);
+        for p in &raw {
+            let q = Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z);
+            lo = lo.inf(&q);
+            hi = hi.sup(&q);
+        }
+        (yaw, lo, hi)
+    };
+    let area = |b: &(f64, Vector3<f64>, Vector3<f64>)| (b.2.x - b.1.x) * (b.2.y - b.1.y);
+    let edge_box = frame_box(edge_yaw);
+    let (yaw, lo, hi) = match major_axis(&centres) {
+        Some((axis_yaw, ratio)) if ratio >= ELONGATED_RATIO => {
+            let axis_box = frame_box(axis_yaw);
+            if area(&axis_box) < area(&edge_box) {
+                axis_box
+            } else {
+                edge_box
+            }
+        }
+        _ => edge_box,
+    };
     let (s, c) = yaw.sin_cos();
-    let local = |p: &Vector3<f64>| Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z);
-    let mut lo = Vector3::repeat(f64::MAX);
-    let mut hi = Vector3::repeat(f64::MIN);
-    for p in &raw {
-        let q = local(p);
-        lo = lo.inf(&q);
-        hi = hi.sup(&q);
-    }
     let size = hi - lo;
     let mid = (lo + hi) / 2.0;
     let centre = Vector3::new(c * mid.x - s * mid.y, s * mid.x + c * mid.y, mid.z);
     // Points on a side (the top may be the field of view's edge, the bottom is cut by the floor
-    // band), against faces placed
-    // at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
+    // band), against faces placed at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
     // outside it, and the extremes would move the faces off the bulk.
+    // The faces are those of the edge frame: a box's own.
+    let (es, ec) = edge_yaw.sin_cos();
+    let local = |p: &Vector3<f64>| Vector3::new(ec * p.x + es * p.y, -es * p.x + ec * p.y, p.z);
     let stride = (raw.len() / 600).max(1);
     let sample: Vec<Vector3<f64>> = raw.iter().step_by(stride).map(local).collect();
     let quantiles = |axis: usize| {
