@@ -7,8 +7,10 @@
 //! - [`pose`]: the responder's world pose (composition, interpolation, drift correction).
 //! - [`record`]: MCAP recordings of ROS 2 messages (CDR), written crash-safe and read back.
 //! - [`detect`]: people in a window of points (oriented boxes, scores, their points).
+//! - [`ar`]: the responder's first-person AR frame (people projected in red, see-through).
 
 pub mod align;
+pub mod ar;
 pub mod cloud;
 pub mod detect;
 pub mod error;

@@ -1,0 +1,53 @@
+//! Settings of the AR renderer, loaded from TOML (`config/ar.toml`); every field has a default.
+
+use crate::PipelineError;
+use serde::{Deserialize, Serialize};
+
+/// How [`crate::ar::render`] draws a frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderConfig {
+    /// Draw each person's oriented box as a red wireframe (the paper's optional hint) besides
+    /// their points.
+    pub draw_boxes: bool,
+    /// Radius of a person's point, in pixels (0: one pixel). The rig's own points are always one
+    /// pixel.
+    pub point_radius_px: u32,
+    /// The rig's points farther than this are not drawn; their shading runs from bright (near)
+    /// to dark (this far). People are drawn at any depth.
+    pub max_depth_m: f64,
+    /// A person whose detection is older than this is drawn dimmed (the overlay may lag the
+    /// person), and the status line flags the detection age as stale.
+    pub stale_after_ms: f64,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        Self { draw_boxes: true, point_radius_px: 2, max_depth_m: 30.0, stale_after_ms: 500.0 }
+    }
+}
+
+impl RenderConfig {
+    /// Parses and validates a TOML document.
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let config: Self =
+            toml::from_str(text).map_err(|e| PipelineError::BadFile { format: "AR config", reason: e.to_string() })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Rejects settings the renderer cannot use.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let bad = |reason: String| Err(PipelineError::BadFile { format: "AR config", reason });
+        if !(self.max_depth_m.is_finite() && self.max_depth_m > 0.0) {
+            return bad(format!("max_depth_m must be positive, not {}", self.max_depth_m));
+        }
+        if self.stale_after_ms.is_nan() || self.stale_after_ms < 0.0 {
+            return bad(format!("stale_after_ms must be >= 0, not {}", self.stale_after_ms));
+        }
+        if self.point_radius_px > 32 {
+            return bad(format!("point_radius_px must be <= 32, not {}", self.point_radius_px));
+        }
+        Ok(())
+    }
+}

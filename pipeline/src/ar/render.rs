@@ -1,0 +1,173 @@
+//! Drawing one AR frame: background, the rig's own points by depth, people in red on top, box
+//! wireframes, the status line.
+
+use super::font::{draw_text, GLYPH_H};
+use super::{project_people, ArFrame, ArPerson, ArStatus, CameraModel, OrientedBox, RenderConfig, NEAR_M};
+use nalgebra::{Isometry3, Point3, Vector3};
+
+/// A person with a fresh detection.
+pub const COLOUR_PERSON: [u8; 3] = [255, 0, 0];
+/// A person whose detection is older than `stale_after_ms`: the same hue, dimmed.
+pub const COLOUR_PERSON_STALE: [u8; 3] = [128, 16, 16];
+const COLOUR_BACKGROUND: [u8; 3] = [10, 10, 14];
+const COLOUR_BAR: [u8; 3] = [0, 0, 0];
+const COLOUR_ALIGNED: [u8; 3] = [60, 220, 90];
+const COLOUR_NOT_ALIGNED: [u8; 3] = [255, 170, 0];
+const COLOUR_TEXT: [u8; 3] = [225, 225, 225];
+/// The rig's points: bright blue-grey when near, fading to near-background at `max_depth_m`.
+const COLOUR_RIG_NEAR: [f64; 3] = [170.0, 190.0, 230.0];
+const COLOUR_RIG_FAR: [f64; 3] = [30.0, 34.0, 50.0];
+/// No side of a frame is larger than this (a corrupt camera model must not allocate gigabytes).
+const MAX_SIDE_PX: u32 = 8192;
+
+/// The 8 corners of a box; corner `i` takes the `+` half-size along axis `k` when bit `k` of
+/// `i` is set (axes: length along the heading, width, height).
+pub fn box_corners(b: &OrientedBox) -> [Vector3<f64>; 8] {
+    let (s, c) = b.yaw_rad.sin_cos();
+    let half = b.size_m / 2.0;
+    std::array::from_fn(|i| {
+        let sign = |k: usize| if i & (1 << k) != 0 { 1.0 } else { -1.0 };
+        let (x, y, z) = (sign(0) * half.x, sign(1) * half.y, sign(2) * half.z);
+        b.centre_m + Vector3::new(c * x - s * y, s * x + c * y, z)
+    })
+}
+
+/// The 12 edges of a box as pairs of [`box_corners`] indices (corners one bit apart).
+pub const BOX_EDGES: [(usize, usize); 12] =
+    [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)];
+
+/// The responder's first-person frame. See the module documentation for what is drawn; when
+/// `status.aligned` is false, people are not drawn (their pose in the camera is unknown) and
+/// the status line says so.
+pub fn render(
+    camera: &CameraModel,
+    world_t_camera: &Isometry3<f64>,
+    rig_points_world: &[Vector3<f64>],
+    people: &[ArPerson],
+    status: &ArStatus,
+    cfg: &RenderConfig,
+) -> ArFrame {
+    let (w, h) = (camera.width.min(MAX_SIDE_PX), camera.height.min(MAX_SIDE_PX));
+    let mut frame = ArFrame::filled(w, h, COLOUR_BACKGROUND);
+    let camera_t_world = world_t_camera.inverse();
+    draw_rig_points(&mut frame, camera, &camera_t_world, rig_points_world, cfg);
+    if status.aligned {
+        let stale_ns = cfg.stale_after_ms * 1e6;
+        let colour = |p: &ArPerson| if p.age_ns as f64 > stale_ns { COLOUR_PERSON_STALE } else { COLOUR_PERSON };
+        if cfg.draw_boxes {
+            for p in people {
+                if let Some(b) = &p.bbox {
+                    draw_box(&mut frame, camera, &camera_t_world, b, colour(p));
+                }
+            }
+        }
+        let mut projected = Vec::with_capacity(people.iter().map(|p| p.points_world.len()).sum());
+        project_people(camera, world_t_camera, people, &mut projected);
+        // Fresh people last: where a stale overlay and a fresh one overlap, the fresh one shows.
+        for stale_pass in [true, false] {
+            for q in &projected {
+                let c = people.get(q.person).map_or(COLOUR_PERSON, colour);
+                if (c == COLOUR_PERSON_STALE) == stale_pass {
+                    frame.disc(q.u, q.v, cfg.point_radius_px, c);
+                }
+            }
+        }
+    }
+    draw_status(&mut frame, status, cfg);
+    frame
+}
+
+/// The rig's own points, one pixel each, nearest wins, shaded by depth.
+fn draw_rig_points(
+    frame: &mut ArFrame,
+    camera: &CameraModel,
+    camera_t_world: &Isometry3<f64>,
+    points: &[Vector3<f64>],
+    cfg: &RenderConfig,
+) {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let mut depth = vec![f32::INFINITY; w * h];
+    for p in points {
+        let c = camera_t_world.transform_point(&Point3::from(*p)).coords;
+        if c.z > cfg.max_depth_m {
+            continue;
+        }
+        let Some((u, v)) = camera.project(&c) else { continue };
+        let (x, y) = (u as usize, v as usize);
+        if x >= w || y >= h {
+            continue;
+        }
+        let Some(d) = depth.get_mut(y * w + x) else { continue };
+        let z = c.z as f32;
+        if z >= *d {
+            continue;
+        }
+        *d = z;
+        let t = (c.z / cfg.max_depth_m).clamp(0.0, 1.0);
+        let shade: [u8; 3] =
+            std::array::from_fn(|k| (COLOUR_RIG_NEAR[k] + (COLOUR_RIG_FAR[k] - COLOUR_RIG_NEAR[k]) * t) as u8);
+        frame.put(x as i64, y as i64, shade);
+    }
+}
+
+/// A box's 12 edges, each cut at the camera's near plane and then at the image border.
+fn draw_box(
+    frame: &mut ArFrame,
+    camera: &CameraModel,
+    camera_t_world: &Isometry3<f64>,
+    b: &OrientedBox,
+    colour: [u8; 3],
+) {
+    let corners = box_corners(b).map(|p| camera_t_world.transform_point(&Point3::from(p)).coords);
+    for (i, j) in BOX_EDGES {
+        let (Some(a), Some(b)) = (corners.get(i), corners.get(j)) else { continue };
+        let Some((a, b)) = clip_near(*a, *b) else { continue };
+        if let (Some(pa), Some(pb)) = (camera.project_unclipped(&a), camera.project_unclipped(&b)) {
+            frame.line(pa, pb, colour);
+        }
+    }
+}
+
+/// The part of a camera-frame segment in front of the near plane.
+fn clip_near(a: Vector3<f64>, b: Vector3<f64>) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    match (a.z >= NEAR_M, b.z >= NEAR_M) {
+        (true, true) => Some((a, b)),
+        (false, false) => None,
+        (a_in, _) => {
+            let t = (NEAR_M - a.z) / (b.z - a.z);
+            let cut = a + (b - a) * t;
+            let cut = Vector3::new(cut.x, cut.y, NEAR_M);
+            Some(if a_in { (a, cut) } else { (cut, b) })
+        }
+    }
+}
+
+/// The status line across the top: alignment, detection age, link, free text.
+fn draw_status(frame: &mut ArFrame, status: &ArStatus, cfg: &RenderConfig) {
+    let scale = status_scale(frame.width);
+    let pad = 2 * scale;
+    frame.fill_rect(0, 0, frame.width, GLYPH_H * scale + 2 * pad, COLOUR_BAR);
+    let (label, colour) =
+        if status.aligned { ("ALIGNED", COLOUR_ALIGNED) } else { ("NOT ALIGNED - PEOPLE HIDDEN", COLOUR_NOT_ALIGNED) };
+    let x = draw_text(frame, pad, pad, scale, colour, label);
+    let age = match status.detection_age_ms {
+        Some(ms) if ms > cfg.stale_after_ms => format!("  DET {ms:.0} MS STALE"),
+        Some(ms) => format!("  DET {ms:.0} MS"),
+        None => "  DET --".to_string(),
+    };
+    let mut rest = format!("{age}  LINK {}", status.link);
+    if !status.text.is_empty() {
+        rest.push_str("  ");
+        rest.push_str(&status.text);
+    }
+    draw_text(frame, x, pad, scale, COLOUR_TEXT, &rest);
+}
+
+/// Font scale of the status line: 2 on frames at least 400 px wide, else 1.
+pub(crate) fn status_scale(width: u32) -> u32 {
+    if width >= 400 {
+        2
+    } else {
+        1
+    }
+}
