@@ -6,7 +6,7 @@ usage: align_peers.py DIR [--peers small_gicp,open3d] [--voxel 0.25] [--max-corr
 DIR holds what the Rust bench (or test) wrote:
   source.f64, target.f64   raw little-endian float64 x,y,z triples
   seeds.txt                one initial T_target_source per line: 16 numbers, row-major
-Prints one JSON object per line: {"peer", "trial", "T" (16 numbers, row-major), "ms"}, and per
+Prints one JSON object per line: {"peer", "trial", "T" (16 numbers, row-major), "ms", "cpu_ms"}, and per
 peer one {"peer", "prepare_ms"} line first. Each peer runs single-threaded; "ms" is the
 registration call alone (the clouds are reduced and the target's normals and tree built once,
 like STARC's prepared target; the source's reduction is timed into prepare_ms).
@@ -47,7 +47,7 @@ def run_small_gicp(src, tgt, seeds, a):
     source, _ = small_gicp.preprocess_points(src, downsampling_resolution=a.voxel, num_threads=1)
     emit({"peer": "small_gicp", "prepare_ms": (time.perf_counter() - t0) * 1e3})
     for i, seed in enumerate(seeds):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.thread_time()
         r = small_gicp.align(
             target,
             source,
@@ -58,8 +58,9 @@ def run_small_gicp(src, tgt, seeds, a):
             num_threads=1,
             max_iterations=a.iterations,
         )
-        ms = (time.perf_counter() - t) * 1e3
-        emit({"peer": "small_gicp", "trial": i, "T": np.asarray(r.T_target_source).reshape(-1).tolist(), "ms": ms})
+        ms, cpu_ms = (time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3
+        T = np.asarray(r.T_target_source).reshape(-1).tolist()
+        emit({"peer": "small_gicp", "trial": i, "T": T, "ms": ms, "cpu_ms": cpu_ms})
 
 
 def run_open3d(src, tgt, seeds, a):
@@ -73,10 +74,11 @@ def run_open3d(src, tgt, seeds, a):
     emit({"peer": "open3d", "prepare_ms": (time.perf_counter() - t0) * 1e3})
     criteria = reg.ICPConvergenceCriteria(max_iteration=a.iterations)
     for i, seed in enumerate(seeds):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.thread_time()
         r = reg.registration_icp(source, target, a.max_corr, seed, reg.TransformationEstimationPointToPlane(), criteria)
-        ms = (time.perf_counter() - t) * 1e3
-        emit({"peer": "open3d", "trial": i, "T": np.asarray(r.transformation).reshape(-1).tolist(), "ms": ms})
+        ms, cpu_ms = (time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3
+        T = np.asarray(r.transformation).reshape(-1).tolist()
+        emit({"peer": "open3d", "trial": i, "T": T, "ms": ms, "cpu_ms": cpu_ms})
 
 
 def main():
