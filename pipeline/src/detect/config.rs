@@ -5,8 +5,8 @@ use crate::PipelineError;
 use serde::{Deserialize, Serialize};
 
 /// Settings of [`crate::detect::GeometricDetector`]. Heights are above the estimated floor;
-/// lengths in metres. The defaults were tuned on the simulator's lab and tactical scenarios
-/// (seed 1) and checked on all four shipped scenarios (docs/detect.md).
+/// lengths in metres. The defaults were tuned on the simulator's four shipped scenarios (seed 1;
+/// seed 2, other noise on the same scenes, checks them): see docs/detect.md.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DetectConfig {
