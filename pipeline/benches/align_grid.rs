@@ -12,6 +12,7 @@
 //!
 //! Environment: STARC_ALIGN_CONFIG (TOML overriding the defaults), STARC_ALIGN_NO_PEERS=1,
 //! STARC_ALIGN_SIM (`scenario:duration_s:t_end_s:window_s,...`; empty for none),
+//! STARC_ALIGN_PREPARE_MAP=1 (simulated maps through `prepare_map`), STARC_ALIGN_KEEP_PEER_DIR=1,
 //! STARC_ALIGN_NO_REAL=1, STARC_ALIGN_NO_BASIN=1, STARC_ALIGN_VERBOSE=1 (one line per trial).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -311,7 +312,25 @@ fn main() {
     for item in spec.split(',').filter(|s| !s.is_empty()) {
         let f: Vec<&str> = item.split(':').collect();
         let num = |i: usize| f[i].parse::<f64>().unwrap();
-        let p = align_sim::sim_pair(f[0], num(1), num(2), num(3));
+        let mut p = align_sim::sim_pair(f[0], num(1), num(2), num(3));
+        // STARC_ALIGN_PREPARE_MAP=1: the map with its floor band and ceiling removed (prepare_map).
+        if std::env::var_os("STARC_ALIGN_PREPARE_MAP").is_some() {
+            // STARC_ALIGN_BAND_KEEP_M overrides band_keep_voxel_m (0: the bands removed entirely).
+            let mut c = starc_pipeline::align::MapPrepConfig::default();
+            if let Some(k) = std::env::var("STARC_ALIGN_BAND_KEEP_M").ok().and_then(|v| v.parse().ok()) {
+                c.band_keep_voxel_m = k;
+            }
+            let m = starc_pipeline::align::prepare_map(&p.target, &c).unwrap();
+            println!(
+                "prepared map: floor {:.2} m, ceiling {:.2} m, {} points kept, {} ground and {} ceiling points removed",
+                m.floor_z_m,
+                m.ceiling_z_m,
+                m.points.len(),
+                m.removed_ground,
+                m.removed_ceiling
+            );
+            p.target = m.points;
+        }
         println!("\nsimulated pair: {}", p.describe);
         scenario(&format!("simulated {}", f[0]), &p.source, &p.target, &p.truth, &config);
         sims.push((f[0].to_string(), p));

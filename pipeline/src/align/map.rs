@@ -32,6 +32,10 @@ pub struct MapPrepConfig {
     pub ground_band_m: f64,
     /// Points above ceiling - this are removed.
     pub ceiling_band_m: f64,
+    /// Instead of removing the bands entirely, keep them thinned to this voxel size (0: remove).
+    /// Floor and ceiling then no longer dominate the point count but still constrain height,
+    /// roll and pitch (without them a room's degeneracy index falls about tenfold).
+    pub band_keep_voxel_m: f64,
 }
 
 impl Default for MapPrepConfig {
@@ -45,6 +49,7 @@ impl Default for MapPrepConfig {
             peak_share: 0.3,
             ground_band_m: 0.3,
             ceiling_band_m: 0.3,
+            band_keep_voxel_m: 0.5,
         }
     }
 }
@@ -117,15 +122,24 @@ pub fn prepare_map(points: &[Vec3], c: &MapPrepConfig) -> Result<PreparedMap, Pi
         removed_ground: 0,
         removed_ceiling: 0,
     };
+    let mut band = Vec::new();
     for (p, n) in reduced.iter().zip(normals) {
         if p.z < lo {
             out.removed_ground += 1;
+            band.push(*p);
         } else if p.z > hi {
             out.removed_ceiling += 1;
+            band.push(*p);
         } else {
             out.points.push(*p);
             out.normals.push(n);
         }
+    }
+    if c.band_keep_voxel_m > 0.0 {
+        let thinned = voxel_downsample(&band, c.band_keep_voxel_m);
+        // Floor and ceiling are planes: their normal is vertical.
+        out.normals.extend(thinned.iter().map(|_| Some(Vec3::new(0.0, 0.0, 1.0))));
+        out.points.extend(thinned);
     }
     Ok(out)
 }

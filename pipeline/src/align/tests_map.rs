@@ -34,7 +34,7 @@ fn room() -> Vec<Vec3> {
 
 #[test]
 fn floor_and_ceiling_are_estimated_and_the_bands_removed() {
-    let c = MapPrepConfig::default();
+    let c = MapPrepConfig { band_keep_voxel_m: 0.0, ..MapPrepConfig::default() };
     let m = prepare_map(&room(), &c).unwrap();
     assert!((m.floor_z_m - -1.2).abs() < 0.06, "floor {}", m.floor_z_m);
     assert!((m.ceiling_z_m - 1.6).abs() < 0.06, "ceiling {}", m.ceiling_z_m);
@@ -45,6 +45,11 @@ fn floor_and_ceiling_are_estimated_and_the_bands_removed() {
     assert!(m.points.iter().any(|p| (p.z - -0.45).abs() < 0.06 && p.x > 4.0 && p.x < 5.5));
     assert!(m.points.iter().any(|p| p.x.abs() < 0.06 && p.z > 0.0));
     assert_eq!(m.points.len(), m.normals.len());
+    // The default keeps the bands thinned to 0.5 m: a few floor and ceiling points, not thousands.
+    let thin = prepare_map(&room(), &MapPrepConfig::default()).unwrap();
+    let banded = thin.points.len() - m.points.len();
+    assert!(banded > 100 && banded < (m.removed_ground + m.removed_ceiling) / 10, "{banded}");
+    assert!(thin.points.iter().any(|p| (p.z - -1.2).abs() < 0.1));
     // Nothing horizontal: no floor, a typed error.
     let wall: Vec<Vec3> = (0..2000).map(|i| Vec3::new(f64::from(i % 50) * 0.1, 0.0, f64::from(i / 50) * 0.1)).collect();
     assert!(prepare_map(&wall, &c).is_err());
