@@ -126,8 +126,8 @@ impl DetectConfig {
         if positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(bad("bins, bands, voxel sizes, extents and tolerances must be positive"));
         }
-        if self.voxel_m < 0.02 {
-            return Err(bad("voxel_m below 0.02 m would make the voxel grid explode"));
+        if self.voxel_m < 0.02 || self.floor_bin_m < 0.005 {
+            return Err(bad("voxel_m below 0.02 m or floor_bin_m below 0.005 m would make the grids explode"));
         }
         let ranges = [
             self.upright_height_m,

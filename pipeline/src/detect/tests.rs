@@ -135,6 +135,8 @@ fn the_shipped_config_loads_and_bad_ones_are_refused() {
     assert_eq!(DetectConfig::from_toml("").unwrap(), DetectConfig::default());
     assert!(DetectConfig::from_toml("voxel_size = 0.1").is_err(), "unknown keys are refused");
     assert!(DetectConfig::from_toml("voxel_m = 0.0").is_err());
+    assert!(DetectConfig::from_toml("floor_bin_m = 1e-9").is_err());
+    assert!(DetectConfig::from_toml("max_face_share = nan").is_err());
     assert!(DetectConfig::from_toml("upright_height_m = [2.0, 1.0]").is_err());
     assert!(DetectConfig::from_toml("min_score = 1.5").is_err());
 }
@@ -184,4 +186,32 @@ fn matching_counts_hits_duplicates_misses_and_hidden_people() {
     let lying = TruthPerson { size_m: Vector3::new(1.8, 0.6, 0.25), ..person(4, 0.0, 0.0, 100) };
     let m = match_window(&[detection(0.75, 0.0)], &[lying], &rule);
     assert_eq!(m.counts.true_positives, 1);
+}
+
+#[test]
+fn random_windows_never_panic_and_indices_stay_in_range() {
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    let mut seed = 7u64;
+    let mut next = || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    };
+    for round in 0..40 {
+        let scale = [0.5, 3.0, 30.0, 1e3][round % 4];
+        let points: Vec<WindowPoint> = (0..2000)
+            .map(|_| {
+                let (x, y, z) = (next() * scale, next() * scale, next() * scale);
+                WindowPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns: 0 }
+            })
+            .collect();
+        let mut w = window(&points);
+        w.sensor_pose = Isometry3::translation(next() * scale, next() * scale, next() * scale);
+        found.clear();
+        det.detect(&w, &mut found);
+        for d in &found {
+            assert!(d.point_indices.iter().all(|&i| (i as usize) < points.len()));
+            assert!(d.score.is_finite() && d.centre_m.iter().all(|v| v.is_finite()));
+        }
+    }
 }
