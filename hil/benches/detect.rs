@@ -33,8 +33,8 @@ fn main() {
         rule.min_returns, rule.max_centre_distance_m, rule.box_margin_m
     );
     let mut total = Counts::default();
-    // Long enough for the robot to finish its route: in 30 s it has not reached anyone in the
-    // auditorium or the tactical house (no return hits a person).
+    // Long enough for the robot to finish its route: in their own 30 s it has barely reached
+    // the people in the auditorium and not at all in the tactical house.
     for (name, secs) in [("lab", 30.0), ("auditorium", 60.0), ("tactical", 60.0), ("corridor", 30.0)] {
         if !filter.is_empty() && !filter.iter().any(|f| name.contains(f.as_str())) {
             continue;
