@@ -49,6 +49,9 @@ enum Command {
     Align(cmd::align::Args),
     /// LiDAR-inertial odometry on a capture: a TUM trajectory, a map and timing per device.
     Lio(cmd::lio::Args),
+    /// The see-through mission, offline, on a `starc sim` run: both LIOs, detection, alignment,
+    /// projection, AR frames, and report.json scored against the truth.
+    Mission(cmd::mission::Args),
 }
 
 fn main() -> ExitCode {
@@ -72,6 +75,7 @@ fn main() -> ExitCode {
         Command::Base(c) => cmd::base::run(c),
         Command::Align(a) => cmd::align::run(a),
         Command::Lio(a) => cmd::lio::run(a),
+        Command::Mission(a) => cmd::mission::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

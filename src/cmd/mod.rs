@@ -10,6 +10,8 @@ pub mod inspect;
 pub mod lio;
 mod lio_input;
 pub mod livox;
+pub mod mission;
+mod mission_truth;
 pub mod mock;
 pub mod ptp;
 pub mod rates;
