@@ -10,7 +10,8 @@
 //!
 //! Environment: STARC_DRIFT_SIM=`scenario:duration_s` (default `office:60`, the benches' own
 //! scenario), STARC_DRIFT_PERIOD_S (re-registration period, default 2), STARC_DRIFT_WINDOW_S
-//! (window of a re-registration, default 4), STARC_DRIFT_FIRST_WINDOW_S (of the first, default 10),
+//! (window of a re-registration, default 8), STARC_DRIFT_FIRST_WINDOW_S (of the first, default 10),
+//! STARC_DRIFT_MIN_DEGENERACY (acceptance of re-registrations, default the aligner's 0.01),
 //! STARC_DRIFT_GUESS_M / _DEG (how far the first registration's guess is off the truth, default
 //! 0.3 m and 5 deg), STARC_DRIFT_FIRST_SEARCH=1 (the first registration with the seed search).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -18,8 +19,8 @@
 #[path = "align_sim/mod.rs"]
 mod align_sim;
 
-use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use starc_pipeline::align::{pose_error, AlignConfig, Aligner, Vec3};
+use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use starc_pipeline::align::{aggregate_window, pose_error, AggregateStats, AlignConfig, Aligner, Vec3, WindowConfig};
 use starc_pipeline::lio::{Lio, LioConfig, LioScan, ScanOutput};
 use starc_pipeline::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use std::fmt::Write as _;
@@ -30,20 +31,27 @@ fn env_f64(name: &str, default: f64) -> f64 {
 }
 
 /// The rig's scans over `[end - window, end]`, placed by the LIO's poses relative to its pose at
-/// `end` (so the window is in the rig's LiDAR frame at `end`); points the buffer cannot place are
-/// left out.
-fn window(scans: &[LioScan], odom: &PoseBuffer, end_ns: u64, window_ns: u64) -> Vec<Vec3> {
+/// `end` (so the window is in the rig's LiDAR frame at `end`), moving points left out
+/// (`aggregate_window`); points the buffer cannot place are left out too.
+fn window(scans: &[LioScan], odom: &PoseBuffer, end_ns: u64, window_ns: u64, stats: &mut AggregateStats) -> Vec<Vec3> {
     let Ok(at_end) = odom.at(end_ns) else { return Vec::new() };
-    let inv = at_end.inverse();
     let from = end_ns.saturating_sub(window_ns);
-    let mut out = Vec::new();
+    let mut timed = Vec::new();
     for s in scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns) {
         for p in s.points.iter().filter(|p| p.t_ns >= from && p.t_ns <= end_ns) {
-            let Ok(pose) = odom.at(p.t_ns) else { continue };
-            let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-            out.push(q.coords);
+            timed.push((p.t_ns, Vec3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))));
         }
     }
+    let (out, st) = aggregate_window(
+        &timed,
+        |t| odom.at(t).ok(),
+        &at_end.inverse(),
+        &[],
+        &WindowConfig { voxel_m: 0.05, ..WindowConfig::default() },
+    );
+    stats.points_in += st.points_in;
+    stats.excluded_moving += st.excluded_moving;
+    stats.points_out += st.points_out;
     out
 }
 
@@ -62,7 +70,7 @@ fn main() {
     let (scenario, duration) = spec.split_once(':').unwrap();
     let duration_s: f64 = duration.parse().unwrap();
     let period_ns = (env_f64("STARC_DRIFT_PERIOD_S", 2.0) * 1e9) as u64;
-    let window_ns = (env_f64("STARC_DRIFT_WINDOW_S", 4.0) * 1e9) as u64;
+    let window_ns = (env_f64("STARC_DRIFT_WINDOW_S", 8.0) * 1e9) as u64;
     // The first registration has no prior: a longer window (the responder looks around).
     let first_window_ns = (env_f64("STARC_DRIFT_FIRST_WINDOW_S", 10.0) * 1e9) as u64;
     let out_dir = std::env::var_os("STARC_ALIGN_OUT")
@@ -81,6 +89,7 @@ fn main() {
         reseed_yaw_step_deg: 0.0,
         ndt_resolutions_m: vec![2.0, 1.0],
         seed_levels: 1,
+        min_degeneracy_index: env_f64("STARC_DRIFT_MIN_DEGENERACY", AlignConfig::default().min_degeneracy_index),
         ..AlignConfig::default()
     };
     let tracker = Aligner::new(&target, tracking).unwrap();
@@ -120,6 +129,9 @@ fn main() {
     let mut next_registration = 0u64;
     let (mut accepted, mut rejected) = (0u32, 0u32);
     let mut align_ms = Vec::new();
+    let mut window_stats = AggregateStats::default();
+    // The largest correction step applied in one frame (at the rig).
+    let (mut max_step_m, mut max_step_deg) = (0.0f64, 0.0f64);
     for o in &lio_out {
         for w in [&mut corrected, &mut lio_only, &mut WorldPose::new(config.clone())] {
             let _ = w.push_odometry(o.end_ns, o.lidar_pose);
@@ -131,7 +143,7 @@ fn main() {
         let aligned = corrected.correction().is_some();
         let w_ns = if aligned { window_ns } else { first_window_ns };
         if now >= first + w_ns && now >= next_registration {
-            let src = window(&sim.fpv.scans, &odom, now, w_ns);
+            let src = window(&sim.fpv.scans, &odom, now, w_ns, &mut window_stats);
             let truth = align_sim::truth_at(&sim.fpv_truth, now);
             let report = match corrected.world_pose(now).ok().flatten() {
                 // First registration: a hand-off guess, the truth off by STARC_DRIFT_GUESS_M and
@@ -167,7 +179,9 @@ fn main() {
         }
         while next_frame <= now {
             if next_frame >= first {
-                corrected.step_frame();
+                let step = corrected.step_frame();
+                max_step_m = max_step_m.max(step.step_m);
+                max_step_deg = max_step_deg.max(step.step_deg);
                 let t = now.min(next_frame.max(first));
                 let truth = align_sim::truth_at(&sim.fpv_truth, t);
                 if let (Ok(Some(a)), Ok(Some(b))) = (lio_only.world_pose(t), corrected.world_pose(t)) {
@@ -242,6 +256,16 @@ fn main() {
         c_end * 100.0,
         cd_rms,
         cd_end
+    );
+    println!(
+        "largest correction step in one frame: {:.2} mm, {:.3} deg (bounds {} mm, {} deg); windows: {} points in, {} moving left out, {} after 5 cm voxels",
+        max_step_m * 1e3,
+        max_step_deg,
+        config.max_step_m * 1e3,
+        config.max_step_deg,
+        window_stats.points_in,
+        window_stats.excluded_moving,
+        window_stats.points_out
     );
     println!("wrote {}", out_dir.join("align_drift.{csv,svg}").display());
 }
