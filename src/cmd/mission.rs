@@ -564,14 +564,74 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         wall_s: started.elapsed().as_secs_f64(),
     };
     let json = serde_json::to_string_pretty(&report)?;
-    std::fs::write(out.join("report.json"), json.clone() + "\n")?;
+    std::fs::write(out.join("report.json"), json + "\n")?;
     std::fs::write(out.join("frames.csv"), frame_rows.join("\n") + "\n")?;
     std::fs::write(out.join("robot.tum"), robot.tum.join("\n") + "\n")?;
     std::fs::write(out.join("rig.tum"), fpv.tum.join("\n") + "\n")?;
     let mut stdout = std::io::stdout().lock();
-    writeln!(stdout, "{json}")?;
-    writeln!(stdout, "wrote {}", out.display())?;
+    write!(stdout, "{}", summary(&report))?;
+    writeln!(stdout, "  wrote {} (report.json, frames.csv, ar/, robot.tum, rig.tum)", out.display())?;
     Ok(())
+}
+
+fn summary(r: &Report) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let pct = |v: f64| if v.is_finite() { format!("{:.1} %", v * 100.0) } else { "n/a".into() };
+    let _ = writeln!(o, "mission {} ({}, {:.1} s):", r.scenario, r.mode, r.duration_s);
+    let i = &r.inlier_ratio;
+    let _ = writeln!(
+        o,
+        "  inlier ratio (person points in the see-through masks): {} over {} frames (through the true camera pose: {})",
+        pct(i.pooled),
+        i.frames_scored,
+        pct(i.pooled_true_pose)
+    );
+    let d = &r.detection;
+    let _ = writeln!(
+        o,
+        "  detection: precision {:.3}, recall {:.3} ({} true, {} false, {} missed over {} windows)",
+        d.precision, d.recall, d.true_positives, d.false_positives, d.misses, d.windows
+    );
+    let a = &r.alignment;
+    match (a.first_accepted_after_s, a.first_error_m, a.first_error_deg) {
+        (Some(t), Some(m), Some(deg)) => {
+            let _ = writeln!(
+                o,
+                "  alignment: first accepted {t:.1} s after the rig started, {:.1} cm / {deg:.2} deg off the truth; \
+                 {} of {} attempts accepted, {:.0} ms median",
+                m * 100.0,
+                a.accepted,
+                a.attempts,
+                a.time_ms.p50
+            );
+        }
+        _ => {
+            let _ = writeln!(o, "  alignment: none accepted in {} attempts: nothing was drawn", a.attempts);
+        }
+    }
+    let e = &r.rig_pose_error;
+    let _ = writeln!(
+        o,
+        "  rig world pose error: {:.1} cm median, {:.1} cm p99; {:.2} deg median",
+        e.translation_m.p50 * 100.0,
+        e.translation_m.p99 * 100.0,
+        e.rotation_deg.p50
+    );
+    let l = &r.latency_ms;
+    let _ = writeln!(
+        o,
+        "  compute latency: LIO + detection {:.1} / {:.1} ms (p50 / p99), AR frame {:.1} / {:.1} ms, total {:.1} / {:.1} ms \
+         (no link in this path); peak memory {:.0} MiB",
+        l.slam_p50,
+        l.slam_p99,
+        l.viz_p50,
+        l.viz_p99,
+        l.total_p50,
+        l.total_p99,
+        r.memory.peak_rss_mib.unwrap_or(f64::NAN)
+    );
+    o
 }
 
 /// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with

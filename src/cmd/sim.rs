@@ -1,5 +1,6 @@
 //! `starc sim SCENARIO --out DIR`: runs a scenario's simulated sensors through the mock devices
-//! and writes the Avia pcap and the ground truth.
+//! and writes the Avia pcap and the ground truth; with `--mission`, runs the see-through mission
+//! on it (see `mission.rs`).
 
 use anyhow::Context;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
@@ -29,6 +30,10 @@ pub struct Args {
     /// List the shipped scenarios and exit.
     #[arg(long)]
     list: bool,
+    /// Then run the see-through mission on the run (`starc mission DIR`): both LIOs, detection,
+    /// alignment, AR frames and DIR/mission/report.json.
+    #[arg(long)]
+    mission: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -38,6 +43,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             println!("{name:12} {}", s.description);
         }
         return Ok(());
+    }
+    if args.mission && args.no_camera {
+        anyhow::bail!("--mission scores the camera frames: leave out --no-camera");
     }
     let (scenario, text) = Scenario::load(&args.scenario)?;
     let opts = SimOptions {
@@ -93,5 +101,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     println!("  wrote {}", args.out.display());
+    if args.mission {
+        super::mission::run(super::mission::Args { dir: args.out.clone(), out: None, frames_every: 5 })?;
+    }
     Ok(())
 }

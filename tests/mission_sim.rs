@@ -1,0 +1,47 @@
+//! `starc sim lab --mission`: the see-through mission offline on a short simulated run, scored
+//! against the truth; report.json has its documented keys and the rig is placed in the robot's
+//! map within centimetres.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::process::Command;
+
+#[test]
+fn the_mission_aligns_the_rig_and_writes_its_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+        .args(["sim", "lab", "--duration", "12", "--mission", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    println!("{stdout}");
+    let mission = dir.path().join("mission");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(mission.join("report.json")).unwrap()).unwrap();
+    for key in [
+        "/inlier_ratio/pooled",
+        "/detection/precision",
+        "/detection/recall",
+        "/alignment/first_accepted_after_s",
+        "/rig_pose_error/translation_m/p50",
+        "/latency_ms/slam_p50",
+        "/latency_ms/slam_p99",
+        "/latency_ms/viz_p50",
+        "/latency_ms/total_p50",
+        "/latency_ms/total_p99",
+        "/memory/peak_rss_mib",
+    ] {
+        assert!(report.pointer(key).is_some(), "report.json lacks {key}: {report}");
+    }
+    let first = report.pointer("/alignment/first_accepted_after_s").and_then(|v| v.as_f64());
+    assert!(first.is_some_and(|t| t < 6.0), "the rig is aligned within 6 s: {report}");
+    let err = report.pointer("/alignment/first_error_m").and_then(|v| v.as_f64()).unwrap();
+    assert!(err < 0.1, "first alignment {err} m off");
+    let p50 = report.pointer("/rig_pose_error/translation_m/p50").and_then(|v| v.as_f64()).unwrap();
+    assert!(p50 < 0.05, "rig world pose error median {p50} m");
+    assert!(report.pointer("/detection/windows").and_then(|v| v.as_u64()).unwrap() > 50);
+    let frames = std::fs::read_dir(mission.join("ar")).unwrap().count();
+    assert!(frames > 10, "{frames} AR frames");
+}
