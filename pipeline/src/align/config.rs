@@ -9,6 +9,10 @@ use serde::{Deserialize, Serialize};
 pub struct AlignConfig {
     /// Coarse stage: NDT grid sizes, coarse to fine.
     pub ndt_resolutions_m: Vec<f64>,
+    /// NDT levels whose cell is larger than this times the source's RMS radius (distance of its
+    /// reduced points from their centroid) are skipped: cells as large as the room blur it into
+    /// false minima. 0 keeps every level.
+    pub ndt_max_cell_ratio: f64,
     /// Voxel size the source is reduced to before NDT.
     pub ndt_source_voxel_m: f64,
     /// Voxel size the target is reduced to before its NDT cells are fitted.
@@ -69,6 +73,7 @@ impl Default for AlignConfig {
     fn default() -> Self {
         Self {
             ndt_resolutions_m: vec![8.0, 4.0, 2.0, 1.0],
+            ndt_max_cell_ratio: 0.0,
             ndt_source_voxel_m: 1.0,
             ndt_target_voxel_m: 0.1,
             ndt_max_iterations: 20,
@@ -136,6 +141,9 @@ impl AlignConfig {
         }
         if !(self.reseed_yaw_step_deg >= 0.0 && self.reseed_yaw_step_deg <= 360.0) {
             return bad("reseed_yaw_step_deg must be in [0, 360]");
+        }
+        if !(self.ndt_max_cell_ratio.is_finite() && self.ndt_max_cell_ratio >= 0.0) {
+            return bad("ndt_max_cell_ratio must be finite and not negative");
         }
         if !(self.reseed_shift_m.is_finite() && self.reseed_shift_m >= 0.0) {
             return bad("reseed_shift_m must be finite and not negative");

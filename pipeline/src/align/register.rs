@@ -146,13 +146,14 @@ impl Aligner {
         let icp_source = voxel_downsample(source, c.icp_voxel_m);
         let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
         let source_reduce_ms = ms_since(t0);
+        let first_level = self.first_level(&ndt_source);
         let mut attempts = Vec::new();
         let mut seeds = Vec::new();
         let mut seed_ms = 0.0;
         if c.reseed_yaw_step_deg > 0.0 {
             let t1 = Instant::now();
             let seed_source = thin(voxel_downsample(&icp_source, c.seed_source_voxel_m), c.seed_max_points);
-            seeds = self.rank_seeds(&seed_source, initial);
+            seeds = self.rank_seeds(&seed_source, initial, first_level);
             seed_ms = ms_since(t1);
             let mut tried: Vec<Isometry3<f64>> = Vec::new();
             for s in &seeds {
@@ -167,7 +168,8 @@ impl Aligner {
                     continue;
                 }
                 tried.push(s.pose);
-                let a = self.attempt(&ndt_source, &icp_source, &s.pose, c.seed_levels, s.yaw_offset_deg, s.shift_m);
+                let after_seeds = (first_level + c.seed_levels).min(self.grids.len().saturating_sub(1));
+                let a = self.attempt(&ndt_source, &icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
                 let done = a.accepted;
                 attempts.push(a);
                 if done {
@@ -175,7 +177,7 @@ impl Aligner {
                 }
             }
         } else {
-            attempts.push(self.attempt(&ndt_source, &icp_source, initial, 0, 0.0, [0.0; 2]));
+            attempts.push(self.attempt(&ndt_source, &icp_source, initial, first_level, 0.0, [0.0; 2]));
         }
         let better = |a: &Attempt, b: &Attempt| {
             (a.accepted, a.metrics.inlier_ratio, -a.metrics.rms_residual_m)
@@ -216,7 +218,21 @@ impl Aligner {
     }
 
     /// The seeds (yaw grid at each seed position) refined on the coarse levels, best score first.
-    fn rank_seeds(&self, seed_source: &[Vec3], initial: &Isometry3<f64>) -> Vec<Seed> {
+    /// The first NDT level whose cell is not too large for the source (`ndt_max_cell_ratio`);
+    /// the finest level is always kept.
+    fn first_level(&self, ndt_source: &[Vec3]) -> usize {
+        let ratio = self.config.ndt_max_cell_ratio;
+        let last = self.config.ndt_resolutions_m.len().saturating_sub(1);
+        if ratio <= 0.0 || ndt_source.is_empty() {
+            return 0;
+        }
+        let n = ndt_source.len() as f64;
+        let centroid = ndt_source.iter().sum::<Vec3>() / n;
+        let radius = (ndt_source.iter().map(|p| (p - centroid).norm_squared()).sum::<f64>() / n).sqrt();
+        self.config.ndt_resolutions_m.iter().position(|&r| r <= ratio * radius).unwrap_or(last).min(last)
+    }
+
+    fn rank_seeds(&self, seed_source: &[Vec3], initial: &Isometry3<f64>, first_level: usize) -> Vec<Seed> {
         let c = &self.config;
         let mut yaws = vec![0.0];
         yaws.extend(yaw_offsets_deg(c.reseed_yaw_step_deg));
@@ -225,7 +241,7 @@ impl Aligner {
         if d > 0.0 {
             shifts.extend([[d, 0.0], [-d, 0.0], [0.0, d], [0.0, -d]]);
         }
-        let levels = c.seed_levels.min(self.grids.len());
+        let levels = (first_level + c.seed_levels).min(self.grids.len());
         let n = seed_source.len().max(1) as f64;
         let mut seeds = Vec::with_capacity(yaws.len() * shifts.len());
         for shift in &shifts {
@@ -235,7 +251,7 @@ impl Aligner {
                 translation.vector.x += shift[0];
                 translation.vector.y += shift[1];
                 let mut pose = Isometry3::from_parts(translation, rot * initial.rotation);
-                for grid in self.grids.iter().take(levels) {
+                for grid in self.grids.iter().take(levels).skip(first_level) {
                     pose = ndt::refine_level(grid, seed_source, pose, c.seed_max_iterations).pose;
                 }
                 let (score, matched) =
