@@ -64,6 +64,16 @@ pub struct Args {
     /// Write every Nth AR frame as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     pub frames_every: u64,
+    /// How well the responder's start is known (as from a marked entry point or a hand-off next
+    /// to the robot): the first alignment is seeded this far off the rig's true start, in metres
+    /// and degrees; the yaw grid searches around it, and a result farther than `--start-gate-m`
+    /// from it is refused.
+    #[arg(long, default_value_t = 1.0)]
+    pub start_hint_m: f64,
+    #[arg(long, default_value_t = 20.0)]
+    pub start_hint_deg: f64,
+    #[arg(long, default_value_t = 2.0)]
+    pub start_gate_m: f64,
 }
 
 /// One device's LIO and the raw scans waiting for their output.
@@ -281,6 +291,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rig_scans: VecDeque<LioScan> = VecDeque::new();
     let mut rig_points: Vec<Vector3<f64>> = Vec::new();
     let mut rig_first_ns: Option<u64> = None;
+    let mut start_hint = Isometry3::identity();
+    let mut start_hint_at: Option<u64> = None;
     let mut next_align_ns = 0u64;
     let (mut attempts, mut accepted) = (0usize, 0usize);
     let mut align_ms = Vec::new();
@@ -389,6 +401,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let _ = world.push_odometry(o.end_ns, o.lidar_pose);
                 let _ = odom.push(o.end_ns, o.lidar_pose);
                 let first = *rig_first_ns.get_or_insert(o.end_ns);
+                if start_hint_at != Some(first) {
+                    // Where the responder is expected: the true start, off by the hint's error.
+                    if let Some(l_t_w) = &lio_t_world {
+                        let h = args.start_hint_m;
+                        let off = Isometry3::from_parts(
+                            nalgebra::Translation3::new(0.8 * h, -0.6 * h, 0.0),
+                            UnitQuaternion::from_euler_angles(0.0, 0.0, args.start_hint_deg.to_radians()),
+                        );
+                        start_hint = l_t_w * truth::at(&gt_fpv, first) * off;
+                        start_hint_at = Some(first);
+                    }
+                }
                 while rig_scans.front().is_some_and(|s| s.end_ns + FIRST_WINDOW_NS < o.end_ns) {
                     rig_scans.pop_front();
                 }
@@ -413,14 +437,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     let report = target.and_then(|target| Aligner::new(&target, cfg)).map(|aligner| {
                         // Without a world pose the responder is taken to start near the robot:
                         // seed at the robot's position; the yaw grid does the rest.
-                        let guess = match world.world_pose(o.end_ns).ok().flatten() {
-                            Some(w_t_fpv) => w_t_fpv * o.lidar_pose.inverse() * frame,
-                            None => Isometry3::from_parts(
-                                robot.last.map_or(Isometry3::identity(), |(_, p)| p).translation,
-                                UnitQuaternion::identity(),
-                            ),
-                        };
-                        let r = aligner.align(&src, &guess);
+                        let guess_fpv = world.world_pose(o.end_ns).ok().flatten().unwrap_or(start_hint);
+                        let r = aligner.align(&src, &(guess_fpv * o.lidar_pose.inverse() * frame));
                         // The registered frame back to the rig's LiDAR pose in the world.
                         let w_t_fpv = r.pose * frame.inverse() * o.lidar_pose;
                         (r, w_t_fpv)
@@ -430,8 +448,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     match report {
                         Ok((r, w_t_fpv)) => {
                             align_ms.push(r.total_ms);
-                            let conditioned = !aligned
-                                || r.best().is_some_and(|b| b.metrics.degeneracy_index >= TRACK_MIN_DEGENERACY);
+                            let conditioned = if aligned {
+                                r.best().is_some_and(|b| b.metrics.degeneracy_index >= TRACK_MIN_DEGENERACY)
+                            } else {
+                                let off = (w_t_fpv.translation.vector - start_hint.translation.vector).norm();
+                                if r.accepted && off > args.start_gate_m {
+                                    tracing::info!(
+                                        off_m = off,
+                                        "rig alignment refused: too far from the expected start"
+                                    );
+                                }
+                                off <= args.start_gate_m
+                            };
                             if r.accepted && !conditioned {
                                 tracing::info!(
                                     "rig re-registration accepted by the aligner but too degenerate to correct drift"

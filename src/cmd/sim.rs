@@ -102,7 +102,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!("  wrote {}", args.out.display());
     if args.mission {
-        super::mission::run(super::mission::Args { dir: args.out.clone(), out: None, frames_every: 5 })?;
+        super::mission::run(super::mission::Args {
+            dir: args.out.clone(),
+            out: None,
+            frames_every: 5,
+            start_hint_m: 1.0,
+            start_hint_deg: 20.0,
+            start_gate_m: 2.0,
+        })?;
     }
     Ok(())
 }
