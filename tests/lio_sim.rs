@@ -8,12 +8,7 @@
 use nalgebra::{Isometry3, Vector3};
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
-use starc_livox::capture;
-use starc_livox::data::DataPacket;
-use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::lio::{
-    Health, ImuSample, Lio, LioConfig, LioFile, LioScan, LioStatus, Refusal, ScanOutput, TimedPoint,
-};
+use starc_pipeline::lio::{Health, ImuSample, Lio, LioConfig, LioFile, LioScan, LioStatus, Refusal, ScanOutput};
 use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -21,6 +16,8 @@ use std::sync::OnceLock;
 const ROBOT_AVIA: Ipv4Addr = Ipv4Addr::new(192, 168, 1, 101);
 const SECS: f64 = 12.0;
 
+#[path = "support/avia_decode.rs"]
+mod avia_decode;
 #[path = "support/tum.rs"]
 mod tum;
 use tum::{read_tum, truth_at};
@@ -47,46 +44,10 @@ fn lab() -> &'static Run {
             camera: false,
         };
         run(&scenario, &text, &opts, &mut |_, _| {}).unwrap();
-        let (imu, scans) = decode(&dir.path().join("avia.pcap"));
+        let avia_decode::Decoded { imu, scans } = avia_decode::decode(&dir.path().join("avia.pcap"), ROBOT_AVIA);
         assert!(imu.len() > 2000 && scans.len() > 100, "{} IMU samples, {} scans", imu.len(), scans.len());
         Run { truth: read_tum(&dir.path().join("gt_robot.tum")), path: dir.path().to_path_buf(), _dir: dir, imu, scans }
     })
-}
-
-/// The robot's IMU samples and scans, decoded from the capture.
-fn decode(pcap: &Path) -> (Vec<ImuSample>, Vec<LioScan>) {
-    let mut assembler = ScanAssembler::new(ScanConfig::default()).unwrap();
-    let (mut imu, mut scans) = (Vec::new(), Vec::new());
-    let mut done = Vec::new();
-    for d in capture::open(pcap).unwrap() {
-        let d = d.unwrap();
-        let (Some(src), Some(dst)) = (d.src, d.dst) else { continue };
-        if *src.ip() != ROBOT_AVIA || src.port() == 65000 || dst.port() == 65000 {
-            continue;
-        }
-        let packet = DataPacket::parse(&d.payload).unwrap();
-        if let Some(s) = packet.imu() {
-            imu.push(ImuSample {
-                t_ns: packet.header.timestamp.ns,
-                gyro_rad_s: Vector3::from(s.gyro_rad_s.map(f64::from)),
-                acc_m_s2: Vector3::from(s.acc_m_s2().map(f64::from)),
-            });
-            continue;
-        }
-        assembler.push(&packet, None, &mut done);
-    }
-    scans.extend(done.drain(..).map(|s| {
-        LioScan {
-            start_ns: s.start.ns,
-            end_ns: s.end().ns,
-            points: s
-                .points
-                .iter()
-                .map(|p| TimedPoint { x_m: p.x_m, y_m: p.y_m, z_m: p.z_m, t_ns: s.start.ns + u64::from(p.offset_ns) })
-                .collect(),
-        }
-    }));
-    (imu, scans)
 }
 
 /// The simulator's external IMU CSV (`time_s,gyro xyz,accel xyz`).

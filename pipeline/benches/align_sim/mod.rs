@@ -2,20 +2,19 @@
 //! mock device's packets), decodes the capture as a real one would be, and reads the ground truth.
 #![allow(dead_code)]
 
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3};
 use starc_hil::sim::run::{run, SimOptions, FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_hil::sim::scenario::Scenario;
-use starc_livox::capture;
-use starc_livox::data::DataPacket;
-use starc_livox::scan::{ScanAssembler, ScanConfig};
 use starc_pipeline::align::{voxel_downsample, Vec3};
-use starc_pipeline::lio::{ImuSample, LioScan, TimedPoint};
-use std::net::Ipv4Addr;
-use std::path::{Path, PathBuf};
+use starc_pipeline::lio::LioScan;
+use std::path::PathBuf;
 
 #[path = "../../../tests/support/tum.rs"]
 mod tum;
 pub use tum::{read_tum, truth_at};
+#[path = "../../../tests/support/avia_decode.rs"]
+mod avia_decode;
+pub use avia_decode::{decode, Decoded};
 
 /// One simulator run's outputs.
 pub struct SimRun {
@@ -24,12 +23,6 @@ pub struct SimRun {
     pub fpv_truth: Vec<(u64, Isometry3<f64>)>,
     pub robot: Decoded,
     pub fpv: Decoded,
-}
-
-/// One Avia's IMU samples and 100 ms scans (points in the LiDAR frame, per-point PTP times).
-pub struct Decoded {
-    pub imu: Vec<ImuSample>,
-    pub scans: Vec<LioScan>,
 }
 
 /// Runs `scenario` for `duration_s` (seed 1, no camera) into a fresh directory under the temp dir.
@@ -57,43 +50,6 @@ impl Drop for SimRun {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
-}
-
-/// The IMU samples and scans of the Avia at `avia`, decoded from the capture.
-pub fn decode(pcap: &Path, avia: Ipv4Addr) -> Decoded {
-    let mut assembler = ScanAssembler::new(ScanConfig::default()).unwrap();
-    let mut imu = Vec::new();
-    let mut done = Vec::new();
-    for d in capture::open(pcap).unwrap() {
-        let d = d.unwrap();
-        let (Some(src), Some(dst)) = (d.src, d.dst) else { continue };
-        if *src.ip() != avia || src.port() == 65000 || dst.port() == 65000 {
-            continue;
-        }
-        let packet = DataPacket::parse(&d.payload).unwrap();
-        if let Some(s) = packet.imu() {
-            imu.push(ImuSample {
-                t_ns: packet.header.timestamp.ns,
-                gyro_rad_s: Vector3::from(s.gyro_rad_s.map(f64::from)),
-                acc_m_s2: Vector3::from(s.acc_m_s2().map(f64::from)),
-            });
-            continue;
-        }
-        assembler.push(&packet, None, &mut done);
-    }
-    let scans = done
-        .drain(..)
-        .map(|s| LioScan {
-            start_ns: s.start.ns,
-            end_ns: s.end().ns,
-            points: s
-                .points
-                .iter()
-                .map(|p| TimedPoint { x_m: p.x_m, y_m: p.y_m, z_m: p.z_m, t_ns: s.start.ns + u64::from(p.offset_ns) })
-                .collect(),
-        })
-        .collect();
-    Decoded { imu, scans }
 }
 
 /// Points of the scans within [from_ns, to_ns], each moved by the pose `pose_at(t)` of its own
