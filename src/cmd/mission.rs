@@ -24,7 +24,7 @@ use starc_hil::sim::truth::tum_line;
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::align::{prepare_map, voxel_downsample, AlignConfig, Aligner, MapPrepConfig};
+use starc_pipeline::align::{voxel_downsample, AlignConfig, Aligner};
 use starc_pipeline::ar::{self, ArPerson, ArStatus, CameraModel, OrientedBox, ProjectedPoint, RenderConfig};
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson};
 use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, GeometricDetector, WindowPoint};
@@ -45,6 +45,12 @@ const DETECT_SCANS: usize = 3;
 const MAP_VOXEL_M: f64 = 0.1;
 /// The rig's first alignment waits for this much of its own map; later ones use this window.
 const FIRST_WINDOW_NS: u64 = 3_000_000_000;
+/// Until the first alignment, each retry uses all of the rig's scans so far, up to this long:
+/// a longer window sees more of the building and aliases less.
+const MAX_FIRST_WINDOW_NS: u64 = 10_000_000_000;
+/// Only the points of a detection fired this close to its stamp are drawn: older ones of a
+/// walking person trail behind them.
+const FRESH_POINTS_NS: u64 = 100_000_000;
 const TRACK_WINDOW_NS: u64 = 3_000_000_000;
 /// A re-registration (drift correction) must be at least this well conditioned: a borderline
 /// one (a corridor's axis) moves a good odometry pose more than it corrects it.
@@ -380,7 +386,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                             points_world: det
                                 .point_indices
                                 .iter()
-                                .filter_map(|&i| points.get(i as usize).map(WindowPoint::xyz))
+                                .filter_map(|&i| points.get(i as usize))
+                                .filter(|p| p.t_ns + FRESH_POINTS_NS >= o.end_ns)
+                                .map(WindowPoint::xyz)
                                 .collect(),
                             bbox: Some(OrientedBox {
                                 centre_m: det.centre_m,
@@ -413,28 +421,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         start_hint_at = Some(first);
                     }
                 }
-                while rig_scans.front().is_some_and(|s| s.end_ns + FIRST_WINDOW_NS < o.end_ns) {
+                while rig_scans.front().is_some_and(|s| s.end_ns + MAX_FIRST_WINDOW_NS < o.end_ns) {
                     rig_scans.pop_front();
                 }
                 let aligned = world.correction().is_some();
                 let w_ns = if aligned { TRACK_WINDOW_NS } else { FIRST_WINDOW_NS };
+                let window_ns = if aligned { w_ns } else { (o.end_ns - first).min(MAX_FIRST_WINDOW_NS) };
                 if o.end_ns >= first + w_ns && o.end_ns >= next_align_ns && map.len() > 1000 {
-                    // The window in a gravity-aligned frame at the rig (so its floor and ceiling
-                    // bands can be removed as the map's are), the map prepared likewise.
-                    let (src_raw, frame) = rig_window(&rig_scans, &odom, o.end_ns, w_ns);
-                    let src = if std::env::var_os("STARC_MISSION_BANDS").is_some() {
-                        prepare_map(&src_raw, &MapPrepConfig::default()).map_or(src_raw, |p| p.points)
-                    } else {
-                        voxel_downsample(&src_raw, MAP_VOXEL_M)
-                    };
+                    // The window in a gravity-aligned frame at the rig; both sides reduced to 10 cm
+                    // voxels. (Preparing both with `prepare_map`, floor and ceiling thinned, placed
+                    // the auditorium's rig 68 cm off and accepted it; reduced alike, it refuses.)
+                    let (src_raw, frame) = rig_window(&rig_scans, &odom, o.end_ns, window_ns);
+                    let src = voxel_downsample(&src_raw, MAP_VOXEL_M);
                     let target: Vec<Vector3<f64>> = map.values().copied().collect();
-                    let target = if std::env::var_os("STARC_MISSION_BANDS").is_some() {
-                        prepare_map(&target, &MapPrepConfig::default()).map(|p| p.points)
-                    } else {
-                        Ok(target)
-                    };
                     let cfg = if aligned { track_cfg.clone() } else { align_cfg.clone() };
-                    let report = target.and_then(|target| Aligner::new(&target, cfg)).map(|aligner| {
+                    let report = Aligner::new(&target, cfg).map(|aligner| {
                         // Without a world pose the responder is taken to start near the robot:
                         // seed at the robot's position; the yaw grid does the rest.
                         let guess_fpv = world.world_pose(o.end_ns).ok().flatten().unwrap_or(start_hint);
@@ -460,7 +461,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                                 }
                                 off <= args.start_gate_m
                             };
-                            if r.accepted && !conditioned {
+                            if r.accepted && !conditioned && aligned {
                                 tracing::info!(
                                     "rig re-registration accepted by the aligner but too degenerate to correct drift"
                                 );

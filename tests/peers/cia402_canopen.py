@@ -7,6 +7,7 @@ Prints JSON with what each step saw.
 """
 import json
 import sys
+import threading
 import time
 
 import canopen
@@ -19,8 +20,14 @@ network.connect(interface="slcan", channel=port, bitrate=1_000_000, sleep_after_
 try:
     node = canopen.BaseNode402(node_id, eds)
     network.add_node(node)
+    # Listen for the boot-up before asking for the reset: canopen's wait_for_bootup() only sees
+    # a boot-up that arrives after it starts waiting, and a loaded machine can be slower than
+    # the drive's answer.
+    booted = threading.Event()
+    network.subscribe(0x700 + node_id, lambda cob_id, data, ts: data[:1] == b"\x00" and booted.set())
     node.nmt.state = "RESET"
-    node.nmt.wait_for_bootup(2)
+    if not booted.wait(10):
+        raise SystemExit("no boot-up message within 10 s of the NMT reset")
     out["bootup"] = True
     out["device_type"] = node.sdo[0x1000].raw
     out["identity_vendor"] = node.sdo[0x1018][1].raw
