@@ -20,6 +20,9 @@ fn ok(out: Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+#[path = "support/avia_decode.rs"]
+mod avia_decode;
+
 fn python() -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
     assert!(p.exists(), "{} missing: .ci/run installs tests/peers/requirements.txt there", p.display());
@@ -53,6 +56,23 @@ fn starc_lio_writes_trajectories_maps_and_timing_that_evo_scores() {
     // The map reads back with our own reader.
     let map = starc_pipeline::cloud::read(&out.join("192.168.1.101_map.pcd")).unwrap();
     assert!(map.len() > 1000, "{} map points", map.len());
+
+    // The same robot data as a recording (MCAP, ROS 2 PointCloud2 with per-point times and Imu)
+    // gives the same trajectory.
+    let rec_path = dir.path().join("robot.mcap");
+    record_robot(&sim.join("avia.pcap"), &rec_path);
+    let rec_out = dir.path().join("lio_mcap");
+    println!("{}", ok(starc().arg("lio").arg(&rec_path).arg("--out").arg(&rec_out).output().unwrap()));
+    let from_pcap = std::fs::read_to_string(out.join("192.168.1.101.tum")).unwrap();
+    let from_mcap = std::fs::read_to_string(rec_out.join("robot.tum")).unwrap();
+    let (a, b) = (tum_positions(&from_pcap), tum_positions(&from_mcap));
+    assert!(a.len() > 50 && a.len().abs_diff(b.len()) <= 1, "{} vs {} poses", a.len(), b.len());
+    let common: Vec<f64> =
+        a.iter().filter_map(|(t, p)| b.iter().find(|(u, _)| u == t).map(|(_, q)| dist(p, q))).collect();
+    assert!(common.len() + 1 >= a.len().min(b.len()), "poses at the same times");
+    let worst = common.iter().copied().fold(0.0, f64::max);
+    println!("recording vs capture: {} common poses, worst difference {:.6} m", common.len(), worst);
+    assert!(worst < 1e-3, "the recording's trajectory differs from the capture's by {worst} m");
 
     let eval = Command::new(python())
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/lio_eval.py"))
@@ -100,4 +120,49 @@ fn starc_lio_explains_what_is_wrong() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("--device"), "{err}");
+}
+
+fn tum_positions(text: &str) -> Vec<(String, [f64; 3])> {
+    text.lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            (f[0].to_string(), [f[1].parse().unwrap(), f[2].parse().unwrap(), f[3].parse().unwrap()])
+        })
+        .collect()
+}
+
+fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Writes the robot's scans and IMU from a sim pcap into an MCAP, each scan after the IMU
+/// samples up to its end (the order a live recorder sees them in).
+fn record_robot(pcap: &Path, path: &Path) {
+    use starc_pipeline::cloud::{CloudPoint, PointCloud};
+    use starc_pipeline::record::{Recorder, RecorderOptions};
+    use starc_time::{Clock, Stamp};
+    let d = avia_decode::decode(pcap, std::net::Ipv4Addr::new(192, 168, 1, 101));
+    let mut rec = Recorder::create(path, RecorderOptions::default()).unwrap();
+    let mut imu = d.imu.iter().peekable();
+    for scan in &d.scans {
+        while let Some(s) = imu.next_if(|s| s.t_ns <= scan.end_ns) {
+            rec.imu(Stamp::new(s.t_ns, Clock::Ptp), s.gyro_rad_s.into(), s.acc_m_s2.into()).unwrap();
+        }
+        let points = scan
+            .points
+            .iter()
+            .map(|p| CloudPoint {
+                x_m: p.x_m,
+                y_m: p.y_m,
+                z_m: p.z_m,
+                offset_ns: (p.t_ns - scan.start_ns) as u32,
+                ..CloudPoint::default()
+            })
+            .collect();
+        rec.point_cloud(&PointCloud::new(Some(Stamp::new(scan.start_ns, Clock::Ptp)), points)).unwrap();
+    }
+    for s in imu {
+        rec.imu(Stamp::new(s.t_ns, Clock::Ptp), s.gyro_rad_s.into(), s.acc_m_s2.into()).unwrap();
+    }
+    rec.finish().unwrap();
 }

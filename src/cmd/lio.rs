@@ -1,5 +1,6 @@
 //! `starc lio CAPTURE --out DIR [--device IP|INDEX] [--config FILE] [--imu FILE] [--dump-scans]`:
-//! LiDAR-inertial odometry, offline, on every Avia of a capture.
+//! LiDAR-inertial odometry, offline, on every Avia of a capture (pcap, pcapng, .lvx) or of a
+//! recording (MCAP: `/<device>/points` with per-point times, `/<device>/imu`).
 //!
 //! Per device (named as `starc export` names it) it writes into DIR:
 //! - `<device>.tum`: the LiDAR's pose at each scan's end, TUM (`t x y z qx qy qz qw`), in the
@@ -13,7 +14,7 @@
 //! and `lio.json`, the summary (timing median and p99, health counts, memory).
 
 use super::export::{DeviceKey, DeviceSelector};
-use super::lio_input::{internal_imu, lio_scan, read_external_imu};
+use super::lio_input::{internal_imu, is_mcap, lio_scan, read_external_imu, recorded, Recorded};
 use anyhow::{bail, Context};
 use serde::Serialize;
 use starc_hil::sim::truth::tum_line;
@@ -21,7 +22,9 @@ use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{Scan, ScanAssembler, ScanConfig, TagFilter};
 use starc_pipeline::cloud::{self, CloudFormat, CloudPoint, PointCloud};
-use starc_pipeline::lio::{Health, ImuSample, ImuSource, InitStatus, Lio, LioConfig, LioFile, LioStatus, ScanOutput};
+use starc_pipeline::lio::{
+    Health, ImuSample, ImuSource, InitStatus, Lio, LioConfig, LioFile, LioScan, LioStatus, ScanOutput,
+};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
@@ -120,21 +123,27 @@ impl DeviceRun {
     /// Hands finished scans to the filter (and the dump).
     fn flush_scans(&mut self, out: &mut Vec<ScanOutput>) -> anyhow::Result<()> {
         for scan in std::mem::take(&mut self.done) {
-            let scan = lio_scan(&scan);
-            self.scans_in += 1;
-            if let Some(w) = &mut self.dump {
-                w.write_all(&scan.start_ns.to_le_bytes())?;
-                w.write_all(&scan.end_ns.to_le_bytes())?;
-                w.write_all(&(scan.points.len() as u32).to_le_bytes())?;
-                for p in &scan.points {
-                    let dt_s = (p.t_ns.saturating_sub(scan.start_ns)) as f32 * 1e-9;
-                    for v in [p.x_m, p.y_m, p.z_m, dt_s] {
-                        w.write_all(&v.to_le_bytes())?;
-                    }
+            self.push_scan(lio_scan(&scan), out)?;
+        }
+        Ok(())
+    }
+
+    fn push_scan(&mut self, scan: LioScan, out: &mut Vec<ScanOutput>) -> anyhow::Result<()> {
+        self.first_ns.get_or_insert(scan.start_ns);
+        self.last_ns = self.last_ns.max(scan.end_ns);
+        self.scans_in += 1;
+        if let Some(w) = &mut self.dump {
+            w.write_all(&scan.start_ns.to_le_bytes())?;
+            w.write_all(&scan.end_ns.to_le_bytes())?;
+            w.write_all(&(scan.points.len() as u32).to_le_bytes())?;
+            for p in &scan.points {
+                let dt_s = (p.t_ns.saturating_sub(scan.start_ns)) as f32 * 1e-9;
+                for v in [p.x_m, p.y_m, p.z_m, dt_s] {
+                    w.write_all(&v.to_le_bytes())?;
                 }
             }
-            self.lio.push_scan(scan, out);
         }
+        self.lio.push_scan(scan, out);
         Ok(())
     }
 
@@ -239,6 +248,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scan_cfg =
         ScanConfig { period_ms: file.scan.period_ms, tags: TagFilter::FastLio, blind_m: 0.0, ..ScanConfig::default() };
     scan_cfg.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    if is_mcap(&args.file) {
+        return run_recording(&args, file, &cfg, &scan_cfg);
+    }
 
     let started = Instant::now();
     let show = std::io::stderr().is_terminal();
@@ -309,13 +321,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    let outputs = conclude(&args, file, started, devices.values_mut(), &mut outs)?;
+    if outputs == 0 {
+        match args.device {
+            Some(sel) => bail!("no data packets from {sel} in {}", args.file.display()),
+            None => bail!("no Livox data packets in {}", args.file.display()),
+        }
+    }
+    if let Some(e) = read_error {
+        bail!("{}: reading stopped early (everything before was processed): {e}", args.file.display());
+    }
+    Ok(())
+}
+
+/// Flushes every device, writes their files and lio.json, prints the report; returns how many
+/// devices there were.
+fn conclude<'a>(
+    args: &Args,
+    file: LioFile,
+    started: Instant,
+    devices: impl Iterator<Item = &'a mut DeviceRun>,
+    outs: &mut Vec<ScanOutput>,
+) -> anyhow::Result<usize> {
     let mut summaries = Vec::new();
-    for dev in devices.values_mut() {
+    for dev in devices {
         dev.done.extend(dev.assembler.finish());
-        dev.flush_scans(&mut outs)?;
-        dev.record(&mut outs)?;
+        dev.flush_scans(outs)?;
+        dev.record(outs)?;
         summaries.push(finish(dev, &args.out)?);
     }
+    let n = summaries.len();
     let summary = Summary {
         capture: args.file.display().to_string(),
         config: file,
@@ -327,14 +362,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::write(args.out.join("lio.json"), json + "\n")
         .with_context(|| format!("writing {}", args.out.join("lio.json").display()))?;
     print!("{}", report(&summary));
-    if devices.is_empty() {
-        match args.device {
-            Some(sel) => bail!("no data packets from {sel} in {}", args.file.display()),
-            None => bail!("no Livox data packets in {}", args.file.display()),
-        }
+    Ok(n)
+}
+
+/// A recording (MCAP): scans from every `/<device>/points` and IMU samples from `/<device>/imu`,
+/// in file order.
+fn run_recording(args: &Args, file: LioFile, cfg: &LioConfig, scan_cfg: &ScanConfig) -> anyhow::Result<()> {
+    if args.device.is_some() || args.imu.is_some() {
+        bail!("--device and --imu are for captures; a recording's devices are its topics (/robot/points, /robot/imu)");
     }
-    if let Some(e) = read_error {
-        bail!("{}: reading stopped early (everything before was processed): {e}", args.file.display());
+    let started = Instant::now();
+    let period_ns = scan_cfg.period_ns();
+    let mut devices: BTreeMap<String, DeviceRun> = BTreeMap::new();
+    let mut outs = Vec::new();
+    let messages = starc_pipeline::record::reader::open(&args.file, starc_pipeline::record::ReadMode::Recover)
+        .with_context(|| format!("opening {}", args.file.display()))?;
+    for m in messages {
+        let m = m.with_context(|| format!("reading {}", args.file.display()))?;
+        let Some(input) = recorded(&m, period_ns)? else { continue };
+        let name = match &input {
+            Recorded::Imu(d, _) | Recorded::Scan(d, _) => d.clone(),
+        };
+        let dev = match devices.entry(name.clone()) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => {
+                e.insert(DeviceRun::new(&args.out, name, cfg, scan_cfg, args.dump_scans)?)
+            }
+        };
+        match input {
+            Recorded::Imu(_, s) => dev.push_imu(s, &mut outs),
+            Recorded::Scan(_, scan) => dev.push_scan(scan, &mut outs)?,
+        }
+        dev.record(&mut outs)?;
+    }
+    if conclude(args, file, started, devices.values_mut(), &mut outs)? == 0 {
+        bail!("{}: no /<device>/points or /<device>/imu messages", args.file.display());
     }
     Ok(())
 }

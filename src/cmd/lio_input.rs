@@ -105,3 +105,53 @@ pub fn lio_scan(scan: &Scan) -> LioScan {
             .collect(),
     }
 }
+
+/// Whether `path` starts with the MCAP magic.
+pub fn is_mcap(path: &Path) -> bool {
+    let mut head = [0u8; 8];
+    std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head)).is_ok()
+        && head == *b"\x89MCAP0\r\n"
+}
+
+/// One input of the LIO from a recording: the device is the topic's first name
+/// (`/robot/points` and `/robot/imu` are device `robot`).
+pub enum Recorded {
+    Imu(String, ImuSample),
+    Scan(String, LioScan),
+}
+
+/// Reads a recorded `sensor_msgs/PointCloud2` scan (stamped at its start, with per-point `t`;
+/// it ends `period_ns` later, as the live scans do) or `sensor_msgs/Imu`; other messages give
+/// `None`.
+pub fn recorded(m: &starc_pipeline::record::RecordedMessage, period_ns: u64) -> anyhow::Result<Option<Recorded>> {
+    use starc_pipeline::record::reader::cloud_from_msg;
+    use starc_pipeline::record::Decoded;
+    let device = m.topic.trim_start_matches('/').split('/').next().unwrap_or("").to_string();
+    let leaf = m.topic.rsplit('/').next().unwrap_or("");
+    if leaf != "points" && leaf != "imu" {
+        return Ok(None);
+    }
+    Ok(match m.decode().with_context(|| format!("{} message {}", m.topic, m.sequence))? {
+        Decoded::PointCloud2(msg) => {
+            let cloud = cloud_from_msg(&msg, Clock::Ptp)?;
+            let Some(start) = cloud.start else { return Ok(None) };
+            let points: Vec<TimedPoint> = cloud
+                .points
+                .iter()
+                .map(|p| TimedPoint { x_m: p.x_m, y_m: p.y_m, z_m: p.z_m, t_ns: start.ns + u64::from(p.offset_ns) })
+                .collect();
+            let last = points.iter().map(|p| p.t_ns).max().unwrap_or(start.ns);
+            let end_ns = (start.ns + period_ns).max(last + 1);
+            Some(Recorded::Scan(device, LioScan { start_ns: start.ns, end_ns, points }))
+        }
+        Decoded::Imu(msg) => {
+            let Some(t_ns) = msg.header.stamp.to_ns() else { return Ok(None) };
+            let (g, a) = (&msg.angular_velocity, &msg.linear_acceleration);
+            Some(Recorded::Imu(
+                device,
+                ImuSample { t_ns, gyro_rad_s: Vector3::new(g.x, g.y, g.z), acc_m_s2: Vector3::new(a.x, a.y, a.z) },
+            ))
+        }
+        _ => None,
+    })
+}
