@@ -67,6 +67,10 @@ pub struct AlignConfig {
     /// Full attempts (the remaining NDT levels, then ICP) on the best-ranked seeds, at most; the
     /// search stops at the first accepted one.
     pub max_full_attempts: usize,
+    /// When no seed at the guess's position passes, the search runs again (up to
+    /// `max_full_attempts` more) at positions this far away along ±x, ±y; 0: never. Off when
+    /// `reseed_shift_m` already seeds positions.
+    pub escalate_shift_m: f64,
 }
 
 impl Default for AlignConfig {
@@ -99,6 +103,7 @@ impl Default for AlignConfig {
             seed_max_iterations: 6,
             seed_prior_margin: 0.1,
             max_full_attempts: 3,
+            escalate_shift_m: 1.5,
         }
     }
 }
@@ -144,6 +149,9 @@ impl AlignConfig {
         }
         if !(self.ndt_max_cell_ratio.is_finite() && self.ndt_max_cell_ratio >= 0.0) {
             return bad("ndt_max_cell_ratio must be finite and not negative");
+        }
+        if !(self.escalate_shift_m.is_finite() && self.escalate_shift_m >= 0.0) {
+            return bad("escalate_shift_m must be finite and not negative");
         }
         if !(self.reseed_shift_m.is_finite() && self.reseed_shift_m >= 0.0) {
             return bad("reseed_shift_m must be finite and not negative");

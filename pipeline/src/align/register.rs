@@ -153,32 +153,83 @@ impl Aligner {
         if c.reseed_yaw_step_deg > 0.0 {
             let t1 = Instant::now();
             let seed_source = thin(voxel_downsample(&icp_source, c.seed_source_voxel_m), c.seed_max_points);
-            seeds = self.rank_seeds(&seed_source, initial, first_level);
+            seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
             seed_ms = ms_since(t1);
             let mut tried: Vec<Isometry3<f64>> = Vec::new();
-            for s in &seeds {
-                if attempts.len() >= c.max_full_attempts {
-                    break;
+            self.try_seeds(&seeds, &ndt_source, &icp_source, first_level, &mut tried, &mut attempts);
+            // Nothing passed from the guess's position: search again at positions around it.
+            if !attempts.iter().any(|a| a.accepted) && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
+                let t2 = Instant::now();
+                let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
+                seed_ms += ms_since(t2);
+                let before = attempts.len();
+                self.try_seeds(&more, &ndt_source, &icp_source, first_level, &mut tried, &mut attempts);
+                if attempts.len() == before {
+                    tracing::debug!("escalated seed search found no new basin");
                 }
-                // Seeds that fell into the same basin would repeat the same attempt.
-                if tried.iter().any(|t| {
-                    let (dt, da) = super::geometry::pose_error(t, &s.pose);
-                    dt < 0.5 && da < 5.0
-                }) {
-                    continue;
-                }
-                tried.push(s.pose);
-                let after_seeds = (first_level + c.seed_levels).min(self.grids.len().saturating_sub(1));
-                let a = self.attempt(&ndt_source, &icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
-                let done = a.accepted;
-                attempts.push(a);
-                if done {
-                    break;
-                }
+                seeds.extend(more);
             }
         } else {
             attempts.push(self.attempt(&ndt_source, &icp_source, initial, first_level, 0.0, [0.0; 2]));
         }
+        self.report(initial, attempts, seeds, icp_source.len(), source_reduce_ms, seed_ms, t0)
+    }
+
+    /// Translation seeds: the guess's position (when `centre`) and positions `d` away along ±x, ±y.
+    fn shifts(&self, d: f64, centre: bool) -> Vec<[f64; 2]> {
+        let mut shifts = if centre { vec![[0.0, 0.0]] } else { Vec::new() };
+        if d > 0.0 {
+            shifts.extend([[d, 0.0], [-d, 0.0], [0.0, d], [0.0, -d]]);
+        }
+        shifts
+    }
+
+    /// Full attempts on the best-ranked seeds not yet tried, until one is accepted or
+    /// `max_full_attempts` more have run.
+    fn try_seeds(
+        &self,
+        seeds: &[Seed],
+        ndt_source: &[Vec3],
+        icp_source: &[Vec3],
+        first_level: usize,
+        tried: &mut Vec<Isometry3<f64>>,
+        attempts: &mut Vec<Attempt>,
+    ) {
+        let c = &self.config;
+        let limit = attempts.len() + c.max_full_attempts;
+        for s in seeds {
+            if attempts.len() >= limit {
+                break;
+            }
+            // Seeds that fell into the same basin would repeat the same attempt.
+            if tried.iter().any(|t| {
+                let (dt, da) = super::geometry::pose_error(t, &s.pose);
+                dt < 0.5 && da < 5.0
+            }) {
+                continue;
+            }
+            tried.push(s.pose);
+            let after_seeds = (first_level + c.seed_levels).min(self.grids.len().saturating_sub(1));
+            let a = self.attempt(ndt_source, icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
+            let done = a.accepted;
+            attempts.push(a);
+            if done {
+                break;
+            }
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn report(
+        &self,
+        initial: &Isometry3<f64>,
+        attempts: Vec<Attempt>,
+        seeds: Vec<Seed>,
+        source_points: usize,
+        source_reduce_ms: f64,
+        seed_ms: f64,
+        t0: Instant,
+    ) -> AlignReport {
         let better = |a: &Attempt, b: &Attempt| {
             (a.accepted, a.metrics.inlier_ratio, -a.metrics.rms_residual_m)
                 > (b.accepted, b.metrics.inlier_ratio, -b.metrics.rms_residual_m)
@@ -207,7 +258,7 @@ impl Aligner {
             best_attempt: best,
             transform: pose_rows(&pose),
             pose,
-            source_points: icp_source.len(),
+            source_points,
             source_reduce_ms,
             seeds,
             seed_ms,
@@ -232,19 +283,20 @@ impl Aligner {
         self.config.ndt_resolutions_m.iter().position(|&r| r <= ratio * radius).unwrap_or(last).min(last)
     }
 
-    fn rank_seeds(&self, seed_source: &[Vec3], initial: &Isometry3<f64>, first_level: usize) -> Vec<Seed> {
+    fn rank_seeds(
+        &self,
+        seed_source: &[Vec3],
+        initial: &Isometry3<f64>,
+        first_level: usize,
+        shifts: &[[f64; 2]],
+    ) -> Vec<Seed> {
         let c = &self.config;
         let mut yaws = vec![0.0];
         yaws.extend(yaw_offsets_deg(c.reseed_yaw_step_deg));
-        let d = c.reseed_shift_m;
-        let mut shifts = vec![[0.0, 0.0]];
-        if d > 0.0 {
-            shifts.extend([[d, 0.0], [-d, 0.0], [0.0, d], [0.0, -d]]);
-        }
         let levels = (first_level + c.seed_levels).min(self.grids.len());
         let n = seed_source.len().max(1) as f64;
         let mut seeds = Vec::with_capacity(yaws.len() * shifts.len());
-        for shift in &shifts {
+        for shift in shifts {
             for &yaw in &yaws {
                 let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw.to_radians());
                 let mut translation = initial.translation;

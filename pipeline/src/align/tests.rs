@@ -127,7 +127,14 @@ fn nonsense_pair_is_rejected() {
     };
     let source: Vec<Vec3> =
         (0..20_000).map(|_| Vec3::new(next() * 40.0 - 20.0, next() * 40.0 - 20.0, next() * 6.0 - 2.0)).collect();
-    let config = AlignConfig { reseed_yaw_step_deg: 120.0, ..AlignConfig::default() };
+    // With escalation, nothing at the guess's position sends the search to four more positions:
+    // still rejected, in at most twice the attempts.
+    let escalated = AlignConfig { reseed_yaw_step_deg: 120.0, ..AlignConfig::default() };
+    let report = Aligner::new(&target, escalated).unwrap().align(&source, &Isometry3::identity());
+    assert!(!report.accepted);
+    assert_eq!(report.seeds.len(), 3 * 5, "seeds at the guess and at four positions around it");
+    assert!(report.attempts.len() <= 6, "{} full attempts", report.attempts.len());
+    let config = AlignConfig { reseed_yaw_step_deg: 120.0, escalate_shift_m: 0.0, ..AlignConfig::default() };
     let aligner = Aligner::new(&target, config).unwrap();
     let report = aligner.align(&source, &Isometry3::identity());
     let best = report.best().unwrap();
