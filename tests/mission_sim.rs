@@ -44,4 +44,10 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
     assert!(report.pointer("/detection/windows").and_then(|v| v.as_u64()).unwrap() > 50);
     let frames = std::fs::read_dir(mission.join("ar")).unwrap().count();
     assert!(frames > 10, "{frames} AR frames");
+    for plot in ["pose_error.svg", "inlier_ratio.svg", "latency.svg"] {
+        let svg = std::fs::read_to_string(mission.join("plots").join(plot)).unwrap();
+        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"), "{plot}");
+    }
+    let pose_plot = std::fs::read_to_string(mission.join("plots/pose_error.svg")).unwrap();
+    assert!(pose_plot.contains("<polyline"), "the pose error is plotted");
 }

@@ -319,6 +319,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut per_frame_ratio = Vec::new();
     let (mut err_m, mut err_deg) = (Vec::new(), Vec::new());
     let mut viz_ms = Vec::new();
+    let (mut err_series, mut inlier_series) = (Vec::new(), Vec::new());
     let mut frame_rows = vec![
         "frame,time_s,aligned,detections,age_ms,points_in_image,points_in_mask,pose_error_m,pose_error_deg,render_ms"
             .to_string(),
@@ -517,9 +518,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 dir,
                 &mut projected,
             )?;
+            let t_s = f.t_ns.saturating_sub(frames.first().map_or(0, |f| f.t_ns)) as f64 * 1e-9;
             if let Some((m, deg)) = row.pose_error {
                 err_m.push(m);
                 err_deg.push(deg);
+                err_series.push((t_s, m * 100.0));
+            }
+            if row.in_image > 0 {
+                inlier_series.push((t_s, 100.0 * row.in_mask as f64 / row.in_image as f64));
             }
             true_in_mask += row.true_pose.0;
             true_in_image += row.true_pose.1;
@@ -595,11 +601,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(out.join("report.json"), json + "\n")?;
     std::fs::write(out.join("frames.csv"), frame_rows.join("\n") + "\n")?;
+    write_plots(&out, &err_series, &inlier_series, &total)?;
     std::fs::write(out.join("robot.tum"), robot.tum.join("\n") + "\n")?;
     std::fs::write(out.join("rig.tum"), fpv.tum.join("\n") + "\n")?;
     let mut stdout = std::io::stdout().lock();
     write!(stdout, "{}", summary(&report))?;
-    writeln!(stdout, "  wrote {} (report.json, frames.csv, ar/, robot.tum, rig.tum)", out.display())?;
+    writeln!(stdout, "  wrote {} (report.json, frames.csv, ar/, plots/, robot.tum, rig.tum)", out.display())?;
+    Ok(())
+}
+
+/// plots/: the rig's pose error and the inlier ratio over time, the latency histogram.
+fn write_plots(
+    out: &std::path::Path,
+    err_cm: &[(f64, f64)],
+    inlier_pct: &[(f64, f64)],
+    total_ms: &[f64],
+) -> anyhow::Result<()> {
+    use super::svg_plot::{histogram, lines, Series};
+    let dir = out.join("plots");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let err = lines(
+        "rig world pose error against the truth",
+        "time (s)",
+        "position error (cm)",
+        &[Series { name: "rig", colour: "#c33", points: err_cm }],
+    );
+    let inl = lines(
+        "projected person points inside the see-through mask",
+        "time (s)",
+        "inlier ratio (%)",
+        &[Series { name: "per frame", colour: "#36c", points: inlier_pct }],
+    );
+    let lat = histogram("compute latency per robot scan (LIO + detection + AR frame)", "ms", total_ms, 30);
+    for (name, svg) in [("pose_error.svg", err), ("inlier_ratio.svg", inl), ("latency.svg", lat)] {
+        std::fs::write(dir.join(name), svg).with_context(|| format!("writing {}", dir.join(name).display()))?;
+    }
     Ok(())
 }
 

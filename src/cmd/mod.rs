@@ -17,6 +17,7 @@ pub mod ptp;
 pub mod rates;
 pub mod replay;
 pub mod sim;
+mod svg_plot;
 
 /// The tokio runtime every async subcommand runs on; two workers match the target machines.
 pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
