@@ -24,10 +24,10 @@ use starc_hil::sim::truth::tum_line;
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::align::{voxel_downsample, AlignConfig, Aligner};
+use starc_pipeline::align::{pose_error, voxel_downsample, AlignConfig, Aligner};
 use starc_pipeline::ar::{self, ArPerson, ArStatus, CameraModel, OrientedBox, ProjectedPoint, RenderConfig};
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson};
-use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, GeometricDetector, WindowPoint};
+use starc_pipeline::detect::{to_world, DetectConfig, DetectWindow, Detector, GeometricDetector, WindowPoint};
 use starc_pipeline::lio::{Lio, LioConfig, LioScan, ScanOutput};
 use starc_pipeline::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use starc_time::{Clock, Stamp};
@@ -115,16 +115,18 @@ impl Side {
         self.slam_ms.push(o.elapsed_us as f64 * 1e-3);
         let Some(raw) = self.pending.pop_front().filter(|s| s.end_ns == o.end_ns) else { return Vec::new() };
         let span = raw.end_ns.saturating_sub(raw.start_ns).max(1) as f64;
-        raw.points
+        let pose_at = |t_ns: u64| {
+            let f = t_ns.saturating_sub(raw.start_ns) as f64 / span;
+            prev.lerp_slerp(&o.lidar_pose, f.clamp(0.0, 1.0))
+        };
+        let sensor = raw
+            .points
             .iter()
             .filter(|p| p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m > 0.25)
-            .map(|p| {
-                let f = p.t_ns.saturating_sub(raw.start_ns) as f64 / span;
-                let pose = prev.lerp_slerp(&o.lidar_pose, f.clamp(0.0, 1.0));
-                let q = pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-                WindowPoint { x_m: q.x as f32, y_m: q.y as f32, z_m: q.z as f32, t_ns: p.t_ns }
-            })
-            .collect()
+            .map(|p| ([p.x_m, p.y_m, p.z_m], p.t_ns));
+        let mut placed = Vec::with_capacity(raw.points.len());
+        to_world(sensor, pose_at, &mut placed);
+        placed
     }
 }
 
@@ -226,11 +228,6 @@ struct MemoryReport {
     peak_rss_mib: Option<f64>,
 }
 
-fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
-    let d = a.inverse() * b;
-    (d.translation.vector.norm(), d.rotation.angle().to_degrees())
-}
-
 fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
     q.euler_angles().2
 }
@@ -272,14 +269,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .ok()
         .and_then(|t| t.lines().find_map(|l| l.strip_prefix("name = ").map(|n| n.trim_matches('"').to_string())))
         .unwrap_or_default();
-    let camera = CameraModel {
-        width: mount.width,
-        height: mount.height,
-        fx: mount.fx,
-        fy: mount.fy,
-        cx: mount.cx,
-        cy: mount.cy,
-    };
+    let camera = mount.camera.clone();
 
     let mut robot = Side::new()?;
     let mut fpv = Side::new()?;
@@ -307,6 +297,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Re-registration starts from the current world pose: one attempt, no seed search, no NDT
     // levels coarser than a room.
     let track_cfg = AlignConfig {
+        min_degeneracy_index: TRACK_MIN_DEGENERACY,
         reseed_yaw_step_deg: 0.0,
         ndt_resolutions_m: vec![2.0, 1.0],
         seed_levels: 1,
@@ -450,24 +441,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     match report {
                         Ok((r, w_t_fpv)) => {
                             align_ms.push(r.total_ms);
-                            let conditioned = if aligned {
-                                r.best().is_some_and(|b| b.metrics.degeneracy_index >= TRACK_MIN_DEGENERACY)
-                            } else {
-                                let off = (w_t_fpv.translation.vector - start_hint.translation.vector).norm();
-                                if r.accepted && off > args.start_gate_m {
-                                    tracing::info!(
-                                        off_m = off,
-                                        "rig alignment refused: too far from the expected start"
-                                    );
-                                }
-                                off <= args.start_gate_m
-                            };
-                            if r.accepted && !conditioned && aligned {
-                                tracing::info!(
-                                    "rig re-registration accepted by the aligner but too degenerate to correct drift"
-                                );
+                            // Re-registrations are held to their own, stricter acceptance (track_cfg);
+                            // the first alignment must also land near the expected start.
+                            let off = (w_t_fpv.translation.vector - start_hint.translation.vector).norm();
+                            let near_start = aligned || off <= args.start_gate_m;
+                            if r.accepted && !near_start {
+                                tracing::info!(off_m = off, "rig alignment refused: too far from the expected start");
                             }
-                            if r.accepted && conditioned {
+                            if r.accepted && near_start {
                                 accepted += 1;
                                 if let (Some(l_t_w), Some(best)) = (&lio_t_world, r.best()) {
                                     let (m, deg) = pose_error(&w_t_fpv, &(l_t_w * truth::at(&gt_fpv, o.end_ns)));

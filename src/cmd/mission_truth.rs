@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Context};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use starc_pipeline::ar::CameraModel;
 use std::path::Path;
 
 /// (PTP ns, pose) samples of a TUM file, in time order.
@@ -131,12 +132,7 @@ pub fn read_frames(path: &Path) -> anyhow::Result<Vec<CameraFrame>> {
 
 /// The camera's intrinsics and its pose on the rig's LiDAR, from extrinsics.json.
 pub struct CameraMount {
-    pub width: u32,
-    pub height: u32,
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
+    pub camera: CameraModel,
     /// `T_lidar_camera`: camera (optical frame) points into the rig LiDAR's frame.
     pub lidar_t_camera: Isometry3<f64>,
 }
@@ -175,13 +171,14 @@ pub fn read_camera(path: &Path) -> anyhow::Result<CameraMount> {
     ) else {
         bail!("{}: bad fpv_lidar_camera", path.display());
     };
-    Ok(CameraMount {
+    let camera = CameraModel {
         width: u32::try_from(width).unwrap_or(0),
         height: u32::try_from(height).unwrap_or(0),
         fx,
         fy,
         cx,
         cy,
-        lidar_t_camera,
-    })
+    };
+    camera.validate().map_err(|e| anyhow::anyhow!("{}: camera: {e}", path.display()))?;
+    Ok(CameraMount { camera, lidar_t_camera })
 }

@@ -112,6 +112,9 @@ pub struct UpdateSection {
     pub max_neighbour_dist_m: f64,
     /// Largest distance of a neighbour from its fitted plane.
     pub max_plane_dev_m: f64,
+    /// Eigen-directions of the update's normalised information (the degeneracy index's
+    /// eigenvalues, 0 to 1/3) below this take no update: the IMU carries them.
+    pub min_direction_info: f64,
 }
 
 impl Default for UpdateSection {
@@ -123,6 +126,7 @@ impl Default for UpdateSection {
             neighbours: u.neighbours,
             max_neighbour_dist_m: u.max_neighbour_dist_m,
             max_plane_dev_m: u.max_plane_dev_m,
+            min_direction_info: u.min_direction_info,
         }
     }
 }
@@ -175,6 +179,10 @@ impl LioFile {
                 return Err(bad(format!("{name} must be a positive number, not {v}")));
             }
         }
+        let info = self.update.min_direction_info;
+        if !(info.is_finite() && (0.0..=1.0 / 3.0).contains(&info)) {
+            return Err(bad(format!("update.min_direction_info must be between 0 and 1/3, not {info}")));
+        }
         if self.update.neighbours < 3 || self.update.max_iterations == 0 || self.map.points_per_voxel == 0 {
             return Err(bad("update.neighbours must be at least 3, update.max_iterations and \
                  map.points_per_voxel at least 1"
@@ -202,6 +210,7 @@ impl LioFile {
                 neighbours: self.update.neighbours,
                 max_neighbour_dist_m: self.update.max_neighbour_dist_m,
                 max_plane_dev_m: self.update.max_plane_dev_m,
+                min_direction_info: self.update.min_direction_info,
                 ..defaults
             },
             scan_voxel_m: self.scan.voxel_m,

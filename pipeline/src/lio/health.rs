@@ -19,9 +19,6 @@ pub struct HealthConfig {
     /// refused (a glitch, a scan from the wrong place); a settled update into new, unmapped
     /// space may match fewer and is kept.
     pub min_match_ratio: f64,
-    /// Eigen-directions of the update's normalised information (the degeneracy index's
-    /// eigenvalues, between 0 and 1/3) below this take no update: the IMU carries them.
-    pub min_direction_info: f64,
     /// RMS point-to-plane residual above which a scan is refused.
     pub max_rms_m: f64,
     /// A correction of the IMU's prediction larger than this (per scan) is refused.
@@ -37,7 +34,6 @@ impl Default for HealthConfig {
         Self {
             min_matched: 30,
             min_match_ratio: 0.5,
-            min_direction_info: 0.005,
             max_rms_m: 0.15,
             max_correction_m: 0.3,
             max_correction_deg: 5.0,
@@ -49,7 +45,6 @@ impl Default for HealthConfig {
 impl HealthConfig {
     pub fn validate(&self) -> Result<(), String> {
         let finite = [
-            ("health.min_direction_info", self.min_direction_info),
             ("health.min_match_ratio", self.min_match_ratio),
             ("health.max_rms_m", self.max_rms_m),
             ("health.max_correction_m", self.max_correction_m),

@@ -236,7 +236,6 @@ impl Lio {
             }
             let (prior, prior_cov) = (self.state.clone(), self.cov);
             let mut cfg = self.cfg.update;
-            cfg.min_direction_info = self.cfg.health.min_direction_info;
             if self.monitor.is_lost() {
                 cfg.max_neighbour_dist_m *= 3.0;
                 cfg.max_iterations *= 3;
