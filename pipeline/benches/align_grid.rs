@@ -186,6 +186,9 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
     let mut starts = Vec::new();
     let mut ours = Vec::new();
     let mut attempts_hist = [0usize; 8];
+    let mut probe_spread: Vec<(f64, f64, f64)> = Vec::new();
+    let mut hops = 0usize;
+    let mut probe_iters: Vec<f64> = Vec::new();
     for (si, &shift) in SHIFTS_M.iter().enumerate() {
         for y in 0..24 {
             let k = si * 24 + y;
@@ -210,10 +213,74 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
                     r.failure.as_ref().map_or(String::new(), |f| format!(" ({f})")),
                 );
             }
+            if !ok {
+                // Every full attempt of a miss: where it ended and what the acceptance saw.
+                for a in &r.attempts {
+                    let (am, ad) = pose_error(&a.pose, truth);
+                    println!(
+                        "    attempt seed {:+.0} deg ({:+.1}, {:+.1}) m: {:.2} cm {:.3} deg off; icp {} it, rms {:.4}, inliers {:.3}, update {:.1e}, degeneracy {:.4}, accepted {}",
+                        a.seed_yaw_offset_deg,
+                        a.seed_shift_m[0],
+                        a.seed_shift_m[1],
+                        am * 100.0,
+                        ad,
+                        a.icp_iterations,
+                        a.metrics.rms_residual_m,
+                        a.metrics.inlier_ratio,
+                        a.metrics.update_norm,
+                        a.metrics.degeneracy_index,
+                        a.accepted
+                    );
+                    for p in &a.probes {
+                        println!(
+                            "      probe ({:+.2}, {:+.2}) m {:+.1} deg: moved {:.2} cm {:.3} deg, rms {:.4}, inliers {:.3}",
+                            p.shift_m[0],
+                            p.shift_m[1],
+                            p.yaw_deg,
+                            p.moved_m * 100.0,
+                            p.moved_deg,
+                            p.rms_residual_m,
+                            p.inlier_ratio
+                        );
+                    }
+                }
+            }
+            // How far the probes of accepted, correct results land from them (the check's margin).
+            if ok {
+                if let Some(a) = r.best() {
+                    for p in &a.probes {
+                        probe_spread.push((p.moved_m * 100.0, p.moved_deg, a.verify_ms));
+                        probe_iters.push(f64::from(p.iterations));
+                    }
+                    if a.verify_hops > 0 {
+                        hops += 1;
+                    }
+                }
+            }
             attempts_hist[r.attempts.len().min(7)] += 1;
             starts.push(s);
             ours.push(Outcome { err_m, err_deg, ms: r.total_ms, cpu_ms, ok });
         }
+    }
+    if !probe_iters.is_empty() {
+        let it = sorted(probe_iters.iter().copied());
+        println!("probe ICP iterations median {} p99 {} max {:?}", pct(&it, 0.5), pct(&it, 0.99), it.last());
+    }
+    if !probe_spread.is_empty() {
+        let cm = sorted(probe_spread.iter().map(|p| p.0));
+        let deg = sorted(probe_spread.iter().map(|p| p.1));
+        let ms = sorted(probe_spread.iter().map(|p| p.2));
+        println!(
+            "successes moved by the check: {hops}; probes of the successes ({}): moved cm median {:.2} p99 {:.2} max {:.2}; deg median {:.3} p99 {:.3} max {:.3}; check ms median {:.1}",
+            cm.len(),
+            pct(&cm, 0.5),
+            pct(&cm, 0.99),
+            cm.last().copied().unwrap_or(f64::NAN),
+            pct(&deg, 0.5),
+            pct(&deg, 0.99),
+            deg.last().copied().unwrap_or(f64::NAN),
+            pct(&ms, 0.5)
+        );
     }
     let peers = if std::env::var_os("STARC_ALIGN_NO_PEERS").is_some() {
         Vec::new()

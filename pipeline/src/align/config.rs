@@ -71,6 +71,24 @@ pub struct AlignConfig {
     /// `max_full_attempts` more) at positions this far away along ±x, ±y; 0: never. Off when
     /// `reseed_shift_m` already seeds positions.
     pub escalate_shift_m: f64,
+    /// Consistency check of a result that passed the other tests: ICP is run again from starts
+    /// this far off it along ±x and ±y (m, target frame) and `verify_yaw_deg` off in yaw either
+    /// way; 0: off.
+    pub verify_shift_m: f64,
+    pub verify_yaw_deg: f64,
+    /// The check runs on the ICP source thinned to this many points (it only has to tell basins apart).
+    pub verify_max_points: usize,
+    /// Each probe's ICP stops after this many iterations or below this update norm (it only has
+    /// to show which minimum it falls into).
+    pub verify_max_iterations: u32,
+    pub verify_converged_update: f64,
+    /// A probe that settles farther than this from the result (m or deg) with an RMS residual
+    /// more than `verify_margin` (a share) below the result's found a better minimum: ICP goes on
+    /// from there, at most `verify_hops` times; after that the attempt is rejected as inconsistent.
+    pub verify_agree_m: f64,
+    pub verify_agree_deg: f64,
+    pub verify_margin: f64,
+    pub verify_hops: u32,
 }
 
 impl Default for AlignConfig {
@@ -104,6 +122,15 @@ impl Default for AlignConfig {
             seed_prior_margin: 0.1,
             max_full_attempts: 3,
             escalate_shift_m: 1.5,
+            verify_shift_m: 0.2,
+            verify_yaw_deg: 2.0,
+            verify_max_points: 500,
+            verify_max_iterations: 15,
+            verify_converged_update: 1e-3,
+            verify_agree_m: 0.02,
+            verify_agree_deg: 0.2,
+            verify_margin: 0.1,
+            verify_hops: 2,
         }
     }
 }

@@ -10,6 +10,7 @@ pub struct IcpTarget {
     pub normals: Vec<Option<Vec3>>,
 }
 
+#[derive(Clone, Copy)]
 pub struct IcpParams {
     pub max_correspondence_m: f64,
     pub trim_ratio: f64,

@@ -29,7 +29,7 @@ pub use map::{
     aggregate_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig, PreparedMap,
     WindowConfig,
 };
-pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Seed};
+pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Probe, Seed};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]
