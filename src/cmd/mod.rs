@@ -11,6 +11,7 @@ pub mod lio;
 mod lio_input;
 pub mod livox;
 pub mod mission;
+mod mission_score;
 mod mission_truth;
 pub mod mock;
 pub mod ptp;

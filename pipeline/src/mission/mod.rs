@@ -1,0 +1,62 @@
+//! The see-through mission's two sides, sans-IO, shared by the offline run (`starc mission`),
+//! the live nodes (`starc robot`, `starc fpv`) and the simulated mission (`starc sim`):
+//!
+//! - [`RobotCore`]: the robot's LIO, person detection and the map it shares;
+//! - [`RigCore`]: the rig's LIO, its alignment to the robot's map and its world pose;
+//! - [`Overlay`]: the robot's detections as the rig holds and ages them;
+//! - [`render_view`]: the responder's frame at a time, from the three.
+
+mod overlay;
+mod place;
+mod rig;
+mod robot;
+
+pub use overlay::Overlay;
+pub use place::ScanPlacer;
+pub use rig::{AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig};
+pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
+
+use crate::ar::{self, ArFrame, ArPerson, ArStatus, CameraModel, RenderConfig};
+use nalgebra::{Isometry3, Vector3};
+
+/// One rendered view and what went into it.
+pub struct View {
+    pub frame: ArFrame,
+    pub aligned: bool,
+    /// The camera in the robot's world (in the rig's odometry frame until aligned).
+    pub world_t_camera: Isometry3<f64>,
+    pub people: Vec<ArPerson>,
+    /// Age of the newest detection shown.
+    pub detection_age_ms: Option<f64>,
+}
+
+/// The responder's frame at `t_ns` (rig LiDAR clock): the rig's newest scan shaded by depth and,
+/// once aligned, the people the robot saw, through the walls.
+pub fn render_view(
+    camera: &CameraModel,
+    lidar_t_camera: &Isometry3<f64>,
+    rig: &RigCore,
+    overlay: &Overlay,
+    t_ns: u64,
+    link: &str,
+    cfg: &RenderConfig,
+) -> View {
+    let rig_pose = rig.world().world_pose(t_ns).ok().flatten();
+    let aligned = rig_pose.is_some();
+    let odom_pose = rig.world().odometry().at(t_ns).ok();
+    let world_t_camera = rig_pose.or(odom_pose).unwrap_or_else(Isometry3::identity) * lidar_t_camera;
+    // The rig's own points live in its odometry frame: into the world with the correction.
+    let correction = rig.world().correction().unwrap_or_else(Isometry3::identity);
+    let rig_points: Vec<Vector3<f64>> =
+        rig.scan_points().iter().map(|p| correction * nalgebra::Point3::from(*p)).map(|p| p.coords).collect();
+    let people = if aligned { overlay.at(t_ns) } else { Vec::new() };
+    let detection_age_ms = people.iter().map(|p| p.age_ns).min().map(|a| a as f64 * 1e-6);
+    let status = ArStatus {
+        aligned,
+        detection_age_ms,
+        link: link.to_string(),
+        text: if aligned { String::new() } else { "waiting for the first alignment".into() },
+    };
+    let frame = ar::render(camera, &world_t_camera, &rig_points, &people, &status, cfg);
+    View { frame, aligned, world_t_camera, people, detection_age_ms }
+}

@@ -1,0 +1,97 @@
+//! What the rig draws: the people of the robot's recent detections, each at its latest
+//! sighting, held for a while after the robot last saw them, with their age.
+
+use crate::ar::ArPerson;
+use std::collections::VecDeque;
+
+/// A later sighting this close (m, in the floor plane) to an earlier one is the same person.
+const SAME_PERSON_M: f64 = 0.7;
+
+struct Shown {
+    stamp_ns: u64,
+    people: Vec<ArPerson>,
+}
+
+pub struct Overlay {
+    hold_ns: u64,
+    shown: VecDeque<Shown>,
+}
+
+impl Overlay {
+    /// People stay on screen `hold_ns` after the detection that last showed them.
+    pub fn new(hold_ns: u64) -> Self {
+        Self { hold_ns, shown: VecDeque::new() }
+    }
+
+    /// A detection stamped `stamp_ns` (on the clock `at` is asked on).
+    pub fn push(&mut self, stamp_ns: u64, people: Vec<ArPerson>) {
+        // Arrivals may be out of order over the link: keep them sorted by stamp.
+        let at = self.shown.iter().rposition(|s| s.stamp_ns <= stamp_ns).map_or(0, |i| i + 1);
+        self.shown.insert(at, Shown { stamp_ns, people });
+        while self.shown.front().is_some_and(|s| s.stamp_ns.saturating_add(self.hold_ns) < stamp_ns) {
+            self.shown.pop_front();
+        }
+    }
+
+    /// Newest detection stamp held.
+    pub fn newest_ns(&self) -> Option<u64> {
+        self.shown.back().map(|s| s.stamp_ns)
+    }
+
+    /// Everyone seen in the `hold_ns` up to `t_ns`, each at their latest sighting, aged.
+    pub fn at(&self, t_ns: u64) -> Vec<ArPerson> {
+        let mut out: Vec<ArPerson> = Vec::new();
+        for s in self.shown.iter().rev().filter(|s| s.stamp_ns <= t_ns && s.stamp_ns + self.hold_ns >= t_ns) {
+            for p in &s.people {
+                let Some(b) = p.bbox else { continue };
+                let seen =
+                    out.iter().any(|q| q.bbox.is_some_and(|c| (c.centre_m - b.centre_m).xy().norm() < SAME_PERSON_M));
+                if !seen {
+                    out.push(ArPerson { age_ns: t_ns - s.stamp_ns, ..p.clone() });
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ar::OrientedBox;
+    use nalgebra::Vector3;
+
+    fn person(x: f64) -> ArPerson {
+        ArPerson {
+            points_world: vec![Vector3::new(x, 0.0, 1.0)],
+            bbox: Some(OrientedBox {
+                centre_m: Vector3::new(x, 0.0, 0.9),
+                size_m: Vector3::new(0.5, 0.5, 1.8),
+                yaw_rad: 0.0,
+            }),
+            age_ns: 0,
+        }
+    }
+
+    #[test]
+    fn latest_sighting_wins_and_expires() {
+        let mut o = Overlay::new(1_000);
+        o.push(100, vec![person(0.0), person(5.0)]);
+        o.push(300, vec![person(0.2)]);
+        let now = o.at(400);
+        assert_eq!(now.len(), 2);
+        let near = now.iter().find(|p| p.bbox.is_some_and(|b| b.centre_m.x < 1.0)).map(|p| p.age_ns);
+        assert_eq!(near, Some(100));
+        assert!(o.at(50).is_empty(), "nothing before the first detection");
+        assert_eq!(o.at(1_250).len(), 1, "the person last seen at 100 expired");
+    }
+
+    #[test]
+    fn late_arrivals_are_sorted_in() {
+        let mut o = Overlay::new(1_000);
+        o.push(300, vec![person(0.0)]);
+        o.push(200, vec![person(0.1)]);
+        assert_eq!(o.newest_ns(), Some(300));
+        assert_eq!(o.at(350).first().map(|p| p.age_ns), Some(50));
+    }
+}

@@ -1,0 +1,51 @@
+//! Places a scan's raw points in the world once the LIO has posed it: each point by the pose at
+//! its own firing time, interpolated between the previous scan's end pose and this one's.
+
+use crate::detect::{to_world, WindowPoint};
+use crate::lio::{LioScan, ScanOutput};
+use nalgebra::Isometry3;
+use std::collections::VecDeque;
+
+/// Points closer than this (squared, m²) are the rig or the robot itself.
+const MIN_RANGE_SQ_M2: f32 = 0.25;
+
+#[derive(Default)]
+pub struct ScanPlacer {
+    pending: VecDeque<LioScan>,
+    last: Option<(u64, Isometry3<f64>)>,
+}
+
+impl ScanPlacer {
+    /// A raw scan handed to the LIO, kept until its output comes.
+    pub fn pending(&mut self, scan: LioScan) {
+        self.pending.push_back(scan);
+    }
+
+    /// End time and pose of the newest output.
+    pub fn last(&self) -> Option<(u64, Isometry3<f64>)> {
+        self.last
+    }
+
+    /// The raw scan of an output, its points placed in the world (empty when the scan is unknown).
+    pub fn place(&mut self, o: &ScanOutput) -> Vec<WindowPoint> {
+        while self.pending.front().is_some_and(|s| s.end_ns < o.end_ns) {
+            self.pending.pop_front();
+        }
+        let prev = self.last.map_or(o.lidar_pose, |(_, p)| p);
+        self.last = Some((o.end_ns, o.lidar_pose));
+        let Some(raw) = self.pending.pop_front().filter(|s| s.end_ns == o.end_ns) else { return Vec::new() };
+        let span = raw.end_ns.saturating_sub(raw.start_ns).max(1) as f64;
+        let pose_at = |t_ns: u64| {
+            let f = t_ns.saturating_sub(raw.start_ns) as f64 / span;
+            prev.lerp_slerp(&o.lidar_pose, f.clamp(0.0, 1.0))
+        };
+        let sensor = raw
+            .points
+            .iter()
+            .filter(|p| p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m > MIN_RANGE_SQ_M2)
+            .map(|p| ([p.x_m, p.y_m, p.z_m], p.t_ns));
+        let mut placed = Vec::with_capacity(raw.points.len());
+        to_world(sensor, pose_at, &mut placed);
+        placed
+    }
+}

@@ -1,0 +1,201 @@
+//! The robot's side of the mission, sans-IO: its LiDAR's IMU samples and scans in, the LIO pose
+//! of every scan, person detections over a short window of placed scans, and the map the rig
+//! aligns to (kept as one point per voxel, handed out as changed map tiles) out.
+
+use super::place::ScanPlacer;
+use crate::align::encode_tiles;
+use crate::ar::{ArPerson, OrientedBox};
+use crate::detect::{DetectConfig, DetectWindow, Detection, Detector, GeometricDetector, WindowPoint};
+use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::PipelineError;
+use nalgebra::Vector3;
+use starc_time::{Clock, Stamp};
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::time::Instant;
+
+/// How the robot's side runs; the defaults are what `starc sim` measures.
+#[derive(Clone, Debug)]
+pub struct RobotCoreConfig {
+    pub lio: LioConfig,
+    pub detect: DetectConfig,
+    /// Scans per detection window (0.3 s at 10 Hz); the detector runs after every scan.
+    pub detect_scans: usize,
+    /// The map for alignment keeps one point per voxel of this size.
+    pub map_voxel_m: f64,
+    /// Only the points of a detection fired this close to its stamp are sent: older ones of a
+    /// walking person trail behind them.
+    pub fresh_points_ns: u64,
+    /// Edge and quantization of the map tiles sent to the rig.
+    pub tile_edge_m: f64,
+    pub tile_step_m: f64,
+}
+
+impl Default for RobotCoreConfig {
+    fn default() -> Self {
+        Self {
+            lio: LioConfig::default(),
+            detect: DetectConfig::default(),
+            detect_scans: 3,
+            map_voxel_m: 0.1,
+            fresh_points_ns: 100_000_000,
+            tile_edge_m: 4.0,
+            tile_step_m: 0.01,
+        }
+    }
+}
+
+/// People found in one window.
+#[derive(Clone, Debug)]
+pub struct RobotDetection {
+    /// End of the window's newest scan (LiDAR clock).
+    pub stamp_ns: u64,
+    /// What the rig draws: each person's fresh points and box, in the robot's world.
+    pub people: Vec<ArPerson>,
+    pub scores: Vec<f64>,
+    /// The detector's own output and the window it ran on (for scoring).
+    pub found: Vec<Detection>,
+    pub points: Vec<WindowPoint>,
+    pub detect_ms: f64,
+}
+
+/// What one LIO output of the robot gave.
+#[derive(Clone, Debug)]
+pub struct RobotStep {
+    pub output: ScanOutput,
+    pub detection: Option<RobotDetection>,
+}
+
+type VoxelKey = (i32, i32, i32);
+
+pub struct RobotCore {
+    cfg: RobotCoreConfig,
+    lio: Lio,
+    placer: ScanPlacer,
+    detector: GeometricDetector,
+    window: VecDeque<Vec<WindowPoint>>,
+    map: HashMap<VoxelKey, Vector3<f64>>,
+    dirty_tiles: HashSet<VoxelKey>,
+    tile_version: u32,
+    outs: Vec<ScanOutput>,
+}
+
+impl RobotCore {
+    pub fn new(cfg: RobotCoreConfig) -> Result<Self, PipelineError> {
+        if !(cfg.map_voxel_m > 0.0 && cfg.tile_edge_m > cfg.map_voxel_m && cfg.detect_scans > 0) {
+            return Err(PipelineError::BadFile {
+                format: "robot config",
+                reason: "map_voxel_m, tile_edge_m and detect_scans must be positive, tiles larger than voxels".into(),
+            });
+        }
+        Ok(Self {
+            lio: Lio::new(cfg.lio.clone()),
+            detector: GeometricDetector::new(cfg.detect.clone())?,
+            placer: ScanPlacer::default(),
+            window: VecDeque::new(),
+            map: HashMap::new(),
+            dirty_tiles: HashSet::new(),
+            tile_version: 0,
+            outs: Vec::new(),
+            cfg,
+        })
+    }
+
+    pub fn push_imu(&mut self, sample: ImuSample, out: &mut Vec<RobotStep>) {
+        self.lio.push_imu(sample, &mut self.outs);
+        self.drain(out);
+    }
+
+    pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<RobotStep>) {
+        self.placer.pending(scan.clone());
+        self.lio.push_scan(scan, &mut self.outs);
+        self.drain(out);
+    }
+
+    fn drain(&mut self, out: &mut Vec<RobotStep>) {
+        let outs = std::mem::take(&mut self.outs);
+        for o in outs {
+            let placed = self.placer.place(&o);
+            self.add_to_map(&placed);
+            self.window.push_back(placed);
+            if self.window.len() > self.cfg.detect_scans {
+                self.window.pop_front();
+            }
+            let detection = (self.window.len() == self.cfg.detect_scans).then(|| self.detect(&o));
+            out.push(RobotStep { output: o, detection });
+        }
+    }
+
+    fn add_to_map(&mut self, placed: &[WindowPoint]) {
+        let per_tile = (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32;
+        for p in placed {
+            let v = p.xyz() / self.cfg.map_voxel_m;
+            let key = (v.x.floor() as i32, v.y.floor() as i32, v.z.floor() as i32);
+            if let std::collections::hash_map::Entry::Vacant(e) = self.map.entry(key) {
+                e.insert(p.xyz());
+                self.dirty_tiles.insert((
+                    key.0.div_euclid(per_tile),
+                    key.1.div_euclid(per_tile),
+                    key.2.div_euclid(per_tile),
+                ));
+            }
+        }
+    }
+
+    fn detect(&mut self, o: &ScanOutput) -> RobotDetection {
+        let points: Vec<WindowPoint> = self.window.iter().flatten().copied().collect();
+        let t0 = Instant::now();
+        let w = DetectWindow { stamp: Stamp::new(o.end_ns, Clock::Ptp), sensor_pose: o.lidar_pose, points: &points };
+        let mut found = Vec::new();
+        self.detector.detect(&w, &mut found);
+        let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let fresh_from = o.end_ns.saturating_sub(self.cfg.fresh_points_ns);
+        let people = found
+            .iter()
+            .map(|det| ArPerson {
+                points_world: det
+                    .point_indices
+                    .iter()
+                    .filter_map(|&i| points.get(i as usize))
+                    .filter(|p| p.t_ns >= fresh_from)
+                    .map(WindowPoint::xyz)
+                    .collect(),
+                bbox: Some(OrientedBox { centre_m: det.centre_m, size_m: det.size_m, yaw_rad: det.yaw_rad }),
+                age_ns: 0,
+            })
+            .collect();
+        let scores = found.iter().map(|d| d.score).collect();
+        RobotDetection { stamp_ns: o.end_ns, people, scores, found, points, detect_ms }
+    }
+
+    /// The whole map for alignment (one point per voxel), in the robot's world.
+    pub fn map_points(&self) -> Vec<Vector3<f64>> {
+        self.map.values().copied().collect()
+    }
+
+    pub fn map_len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// The map tiles changed since the last call, encoded (see [`crate::align::tiles`]); every
+    /// call that sends anything bumps the version, so a rig keeps the newest of each tile.
+    pub fn take_changed_tiles(&mut self) -> Result<Vec<Vec<u8>>, PipelineError> {
+        if self.dirty_tiles.is_empty() {
+            return Ok(Vec::new());
+        }
+        let per_tile = (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32;
+        let dirty = std::mem::take(&mut self.dirty_tiles);
+        let points: Vec<Vector3<f64>> = self
+            .map
+            .iter()
+            .filter(|(k, _)| {
+                dirty.contains(&(k.0.div_euclid(per_tile), k.1.div_euclid(per_tile), k.2.div_euclid(per_tile)))
+            })
+            .map(|(_, p)| *p)
+            .collect();
+        self.tile_version = self.tile_version.wrapping_add(1);
+        let edge_m = f64::from(per_tile) * self.cfg.map_voxel_m;
+        let normals = vec![None; points.len()];
+        let tiles = encode_tiles(&points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version)?;
+        Ok(tiles.into_iter().map(|(_, bytes)| bytes).collect())
+    }
+}
