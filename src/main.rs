@@ -1,6 +1,9 @@
 //! `starc`: the one command-line program of STARC.
 
 mod cmd;
+// The live views (issue 7): a library for `starc fpv` and `starc sim`, not wired into a command yet.
+#[allow(dead_code, unused_imports)]
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

@@ -8,6 +8,7 @@
 //! - [`record`]: MCAP recordings of ROS 2 messages (CDR), written crash-safe and read back.
 //! - [`detect`]: people in a window of points (oriented boxes, scores, their points).
 //! - [`ar`]: the responder's first-person AR frame (people projected in red, see-through).
+//! - [`link`]: the robot-to-rig link's messages, clock offset and health (sans-IO).
 //! - [`mission`]: the robot's and the rig's sides of the mission, shared by every runner.
 
 pub mod align;
@@ -15,6 +16,7 @@ pub mod ar;
 pub mod cloud;
 pub mod detect;
 pub mod error;
+pub mod link;
 pub mod lio;
 pub mod mission;
 pub mod pose;

@@ -1,0 +1,298 @@
+//! `LinkConfig`: where the link listens and connects, its timings, and its security (TLS and
+//! access control, from a zenoh config file and/or explicit `[tls]` paths).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use starc_pipeline::link::HealthConfig;
+
+use crate::LinkError;
+
+/// How this node joins the zenoh network.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Talks directly to the other end (the usual robot <-> rig case).
+    #[default]
+    Peer,
+    /// Goes through a router (`connect` names it).
+    Client,
+    /// Routes for others.
+    Router,
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+            Mode::Router => "router",
+        }
+    }
+}
+
+/// TLS with a private CA: the listener shows `cert`/`key`, the connector checks them against
+/// `root_ca`; with `mutual`, the listener also asks the connector for its own `cert`/`key`.
+/// Use `tls/<host>:<port>` endpoints. Paths relative to the config file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsConfig {
+    /// PEM of the CA that signed the other end's certificate.
+    pub root_ca: PathBuf,
+    /// This node's PEM certificate and key (needed to listen, or to connect with `mutual`).
+    #[serde(default)]
+    pub cert: Option<PathBuf>,
+    #[serde(default)]
+    pub key: Option<PathBuf>,
+    /// Mutual TLS: listeners refuse connectors without a certificate from `root_ca`.
+    #[serde(default)]
+    pub mutual: bool,
+    /// Check that the listener's certificate names the host or IP connected to.
+    #[serde(default = "yes")]
+    pub verify_name: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// The link's configuration (`config/link.toml` documents every field).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkConfig {
+    #[serde(default)]
+    pub mode: Mode,
+    /// zenoh endpoints to listen on, e.g. `tcp/192.168.1.10:7447`. Empty: listen nowhere (zenoh's
+    /// own default, every interface, is never used).
+    #[serde(default)]
+    pub listen: Vec<String>,
+    /// zenoh endpoints to connect to (retried in the background until they answer).
+    #[serde(default)]
+    pub connect: Vec<String>,
+    /// zenoh's UDP multicast scouting (224.0.0.224:7446). Off: peers meet only through the
+    /// endpoints above, so the link never talks to strangers on the WiFi.
+    #[serde(default)]
+    pub multicast_scouting: bool,
+    /// First key segment of every key.
+    #[serde(default = "default_prefix")]
+    pub key_prefix: String,
+    /// Heartbeat period.
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u64,
+    /// No heartbeat for this long: Stale (overlays greyed).
+    #[serde(default = "default_stale_after_ms")]
+    pub stale_after_ms: u64,
+    /// No heartbeat for this long: Lost.
+    #[serde(default = "default_lost_after_ms")]
+    pub lost_after_ms: u64,
+    /// Clock probe period.
+    #[serde(default = "default_clock_probe_ms")]
+    pub clock_probe_ms: u64,
+    /// Probes the offset filter keeps (the least-delay one wins).
+    #[serde(default = "default_clock_window")]
+    pub clock_window: usize,
+    /// Longest wait between two attempts to reach a `connect` endpoint that is down.
+    #[serde(default = "default_reconnect_ms")]
+    pub reconnect_ms: u64,
+    /// How long the rig waits for the robot's map after asking for it.
+    #[serde(default = "default_map_fetch_timeout_ms")]
+    pub map_fetch_timeout_ms: u64,
+    /// Received messages held for the caller; when full, new ones are dropped and counted.
+    #[serde(default = "default_queue")]
+    pub queue: usize,
+    /// A zenoh JSON5 config file to start from: its `transport/link/tls` and `access_control`
+    /// sections (and anything else) apply; the fields above are written over it.
+    #[serde(default)]
+    pub zenoh_config: Option<PathBuf>,
+    #[serde(default)]
+    pub tls: Option<TlsConfig>,
+}
+
+fn default_prefix() -> String {
+    "starc".into()
+}
+fn default_heartbeat_ms() -> u64 {
+    100
+}
+fn default_stale_after_ms() -> u64 {
+    500
+}
+fn default_lost_after_ms() -> u64 {
+    2000
+}
+fn default_clock_probe_ms() -> u64 {
+    500
+}
+fn default_clock_window() -> usize {
+    32
+}
+fn default_reconnect_ms() -> u64 {
+    500
+}
+fn default_map_fetch_timeout_ms() -> u64 {
+    5000
+}
+fn default_queue() -> usize {
+    1024
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Peer,
+            listen: Vec::new(),
+            connect: Vec::new(),
+            multicast_scouting: false,
+            key_prefix: default_prefix(),
+            heartbeat_ms: default_heartbeat_ms(),
+            stale_after_ms: default_stale_after_ms(),
+            lost_after_ms: default_lost_after_ms(),
+            clock_probe_ms: default_clock_probe_ms(),
+            clock_window: default_clock_window(),
+            reconnect_ms: default_reconnect_ms(),
+            map_fetch_timeout_ms: default_map_fetch_timeout_ms(),
+            queue: default_queue(),
+            zenoh_config: None,
+            tls: None,
+        }
+    }
+}
+
+fn json(s: &str) -> String {
+    // A JSON string literal (endpoints and paths hold no control characters worth keeping).
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => {}
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+fn json_list(items: &[String]) -> String {
+    format!("[{}]", items.iter().map(|s| json(s)).collect::<Vec<_>>().join(","))
+}
+
+impl LinkConfig {
+    pub fn from_toml(text: &str) -> Result<Self, LinkError> {
+        let cfg: Self =
+            toml::from_str(text).map_err(|e| LinkError::Config { field: "(toml)", reason: e.to_string() })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Reads a TOML file; relative paths in it (zenoh_config, tls) are taken from its folder.
+    pub fn from_file(path: &Path) -> Result<Self, LinkError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| LinkError::ConfigFile { path: path.to_path_buf(), reason: e.to_string() })?;
+        let mut cfg: Self = toml::from_str(&text)
+            .map_err(|e| LinkError::ConfigFile { path: path.to_path_buf(), reason: e.to_string() })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let rebase = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        };
+        if let Some(z) = cfg.zenoh_config.as_mut() {
+            rebase(z);
+        }
+        if let Some(t) = cfg.tls.as_mut() {
+            rebase(&mut t.root_ca);
+            for p in [t.cert.as_mut(), t.key.as_mut()].into_iter().flatten() {
+                rebase(p);
+            }
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn health(&self) -> HealthConfig {
+        HealthConfig { stale_after_ms: self.stale_after_ms, lost_after_ms: self.lost_after_ms }
+    }
+
+    pub fn validate(&self) -> Result<(), LinkError> {
+        let bad = |field, reason: String| Err(LinkError::Config { field, reason });
+        if self.heartbeat_ms == 0 || self.heartbeat_ms >= self.stale_after_ms {
+            return bad(
+                "heartbeat_ms",
+                format!("need 0 < {} < stale_after_ms {}", self.heartbeat_ms, self.stale_after_ms),
+            );
+        }
+        self.health().validate().map_err(|e| LinkError::Config { field: "stale_after_ms", reason: e.to_string() })?;
+        if self.clock_probe_ms == 0 || self.clock_window == 0 || self.reconnect_ms == 0 || self.queue == 0 {
+            return bad("clock_probe_ms", "clock_probe_ms, clock_window, reconnect_ms and queue must be > 0".into());
+        }
+        if self.map_fetch_timeout_ms == 0 {
+            return bad("map_fetch_timeout_ms", "must be > 0".into());
+        }
+        let prefix_ok = !self.key_prefix.is_empty()
+            && self.key_prefix.split('/').all(|s| !s.is_empty() && !s.contains(['*', '$', '?', '#']));
+        if !prefix_ok {
+            return bad("key_prefix", format!("{:?}: non-empty segments, no wildcards", self.key_prefix));
+        }
+        for (field, list) in [("listen", &self.listen), ("connect", &self.connect)] {
+            for e in list {
+                if let Err(err) = e.parse::<zenoh::config::EndPoint>() {
+                    return bad(field, format!("{e:?}: {err}"));
+                }
+            }
+        }
+        if let Some(t) = &self.tls {
+            if t.cert.is_some() != t.key.is_some() {
+                return bad("tls", "cert and key go together".into());
+            }
+        }
+        Ok(())
+    }
+
+    /// The zenoh config: the `zenoh_config` file (or zenoh's defaults), with our mode, endpoints,
+    /// scouting, reconnection and TLS written over it.
+    pub fn zenoh(&self) -> Result<zenoh::Config, LinkError> {
+        self.validate()?;
+        let mut z = match &self.zenoh_config {
+            Some(p) => zenoh::Config::from_file(p)
+                .map_err(|e| LinkError::ConfigFile { path: p.clone(), reason: e.to_string() })?,
+            None => zenoh::Config::default(),
+        };
+        let mut set = |key: &'static str, value: String| {
+            z.insert_json5(key, &value).map_err(|e| LinkError::Config { field: key, reason: e.to_string() })
+        };
+        set("mode", json(self.mode.name()))?;
+        // Always written, even empty: zenoh's default listens on every interface.
+        set("listen/endpoints", json_list(&self.listen))?;
+        set("connect/endpoints", json_list(&self.connect))?;
+        // Never give up on a configured endpoint: a robot out of WiFi range comes back.
+        set("connect/timeout_ms", "-1".into())?;
+        set("connect/exit_on_failure", "false".into())?;
+        set(
+            "connect/retry",
+            format!(
+                "{{ period_init_ms: {}, period_max_ms: {}, period_increase_factor: 2 }}",
+                self.reconnect_ms.min(100),
+                self.reconnect_ms
+            ),
+        )?;
+        set("scouting/multicast/enabled", self.multicast_scouting.to_string())?;
+        // Gossip tells peers about addresses they learnt elsewhere; with explicit endpoints on
+        // both ends it only adds a way to reach addresses we did not name.
+        set("scouting/gossip/enabled", "false".into())?;
+        if let Some(t) = &self.tls {
+            let path = |p: &Path| json(&p.to_string_lossy());
+            set("transport/link/tls/root_ca_certificate", path(&t.root_ca))?;
+            if let (Some(c), Some(k)) = (&t.cert, &t.key) {
+                set("transport/link/tls/listen_certificate", path(c))?;
+                set("transport/link/tls/listen_private_key", path(k))?;
+                set("transport/link/tls/connect_certificate", path(c))?;
+                set("transport/link/tls/connect_private_key", path(k))?;
+            }
+            set("transport/link/tls/enable_mtls", t.mutual.to_string())?;
+            set("transport/link/tls/verify_name_on_connect", t.verify_name.to_string())?;
+        }
+        Ok(z)
+    }
+}

@@ -1,0 +1,543 @@
+//! `LinkNode`: one end of the link on a zenoh session. It publishes what the caller gives it,
+//! hands the peer's messages to the caller through a bounded queue, and runs its own heartbeats,
+//! clock probes and (robot side) map queryable in tasks it owns.
+
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use starc_pipeline::link::{
+    decode, encode, map_tile_id, ClockOffset, LinkHealth, LinkMessage, LinkState, OffsetEstimate, Role,
+};
+use starc_time::Stamp;
+use tokio::sync::{mpsc, watch};
+use tokio::task::{JoinHandle, JoinSet};
+use tokio::time::MissedTickBehavior;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::{ConsolidationMode, QueryTarget};
+use zenoh::sample::Sample;
+use zenoh::Session;
+
+use crate::keys::{map_key, message_key, sender_wildcard};
+use crate::stats::{LatencySummary, LatencyWindow};
+use crate::{LinkConfig, LinkError};
+
+type TileKey = (i32, i32, i32);
+
+/// Host realtime clock, nanoseconds (the clock every stamp on the link is in).
+pub fn host_now_ns() -> u64 {
+    Stamp::host_now().ns
+}
+
+/// One message from the peer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Received {
+    pub msg: LinkMessage,
+    /// When it arrived, local host clock.
+    pub recv_host_ns: u64,
+    /// Arrival minus the sender's `sent_host_ns` moved onto the local clock by the current offset
+    /// estimate (heartbeats and detections; None for other kinds or before the first estimate).
+    pub latency_ns: Option<i64>,
+    /// Arrival minus `sent_host_ns` as stamped, no offset applied: the latency itself when both
+    /// hosts are synchronised (PTP, NTP) or are one host.
+    pub raw_latency_ns: Option<i64>,
+    /// Came as an answer to a map fetch rather than as a publication.
+    pub fetched: bool,
+}
+
+/// Where the link stands, for the caller's status line and logs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkReport {
+    pub state: LinkState,
+    /// Since the peer's last heartbeat (None before the first).
+    pub silent_ms: Option<u64>,
+    pub stalls: u64,
+    pub drops: u64,
+    pub resumptions: u64,
+    pub heartbeats: u64,
+    /// Peer clock minus ours.
+    pub clock: Option<OffsetEstimate>,
+    /// Heartbeat transport latency (offset-corrected).
+    pub heartbeat_latency: Option<LatencySummary>,
+    /// Detections transport latency: `sent_host_ns` to arrival (offset-corrected).
+    pub detections_latency: Option<LatencySummary>,
+    /// Detections age on arrival: scan end (`stamp_ns`) to arrival (offset-corrected).
+    pub detections_age: Option<LatencySummary>,
+    /// Messages from the peer handed to the caller, refused as damaged, dropped on a full queue.
+    pub received: u64,
+    pub decode_errors: u64,
+    pub queue_drops: u64,
+    /// Map fetches started (rig) and tiles they brought.
+    pub map_fetches: u64,
+    pub map_tiles_fetched: u64,
+    /// Distinct map tiles: held for publishing (robot) or seen (rig); and what the peer's last
+    /// heartbeat said it holds.
+    pub map_tiles: usize,
+    pub peer_map_tiles: u32,
+}
+
+/// What the node's tasks share with the zenoh callbacks.
+struct Shared {
+    health: LinkHealth,
+    clock: ClockOffset,
+    /// Our recent probes (seq, t1), to match replies.
+    probes: VecDeque<(u32, u64)>,
+    heartbeat_latency: LatencyWindow,
+    detections_latency: LatencyWindow,
+    detections_age: LatencyWindow,
+    received: u64,
+    decode_errors: u64,
+    queue_drops: u64,
+    map_fetches: u64,
+    map_tiles_fetched: u64,
+    peer_map_tiles: u32,
+    /// Rig: tiles seen (key -> newest version).
+    tiles_seen: HashMap<TileKey, u32>,
+    /// Robot: newest tile of each key, as encoded link frames, for the map queryable.
+    tiles_held: BTreeMap<TileKey, (u32, Vec<u8>)>,
+    fetch_in_flight: bool,
+    last_fetch_ns: u64,
+}
+
+impl Shared {
+    fn map_tiles(&self, role: Role) -> usize {
+        match role {
+            Role::Robot => self.tiles_held.len(),
+            Role::Rig => self.tiles_seen.len(),
+        }
+    }
+}
+
+fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
+    // A panic elsewhere while holding the lock leaves counters at worst half-updated: keep going.
+    shared.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Work the zenoh callbacks hand to the node's task (callbacks must not block).
+enum Control {
+    ReplyProbe { seq: u32, t1_ns: u64, t2_ns: u64 },
+    FetchMap,
+}
+
+/// Everything a callback needs.
+#[derive(Clone)]
+struct Inbox {
+    role: Role,
+    cfg: Arc<LinkConfig>,
+    shared: Arc<Mutex<Shared>>,
+    to_caller: mpsc::Sender<Received>,
+    control: mpsc::Sender<Control>,
+}
+
+fn signed_diff(a: u64, b: u64) -> i64 {
+    i64::try_from(i128::from(a) - i128::from(b)).unwrap_or(if a > b { i64::MAX } else { i64::MIN })
+}
+
+impl Inbox {
+    fn on_bytes(&self, bytes: &[u8], fetched: bool) {
+        let recv_host_ns = host_now_ns();
+        let msg = match decode(bytes) {
+            Ok(m) => m,
+            Err(e) => {
+                lock(&self.shared).decode_errors += 1;
+                tracing::debug!("link: refused a message: {e}");
+                return;
+            }
+        };
+        let mut s = lock(&self.shared);
+        let latency = |s: &Shared, sent: u64| {
+            let raw = signed_diff(recv_host_ns, sent);
+            let corrected = s.clock.peer_to_local(sent).map(|local| signed_diff(recv_host_ns, local));
+            (corrected, raw)
+        };
+        let (mut latency_ns, mut raw_latency_ns) = (None, None);
+        match &msg {
+            LinkMessage::Heartbeat { role, sent_host_ns, map_tiles, .. } => {
+                if *role != self.role.peer() {
+                    tracing::debug!("link: heartbeat from a {} ignored", role.name());
+                    return;
+                }
+                let was = s.health.state();
+                if s.health.on_heartbeat(recv_host_ns).is_some() {
+                    tracing::info!("link: {} up (was {was})", self.role.peer().name());
+                    if was == LinkState::Lost {
+                        // The peer may have restarted on a stepped clock: measure afresh.
+                        s.clock.reset();
+                        s.probes.clear();
+                    }
+                    if self.role == Role::Rig {
+                        self.request_fetch(&mut s, recv_host_ns, true);
+                    }
+                }
+                let (c, _) = latency(&s, *sent_host_ns);
+                if let Some(c) = c {
+                    s.heartbeat_latency.record(c);
+                }
+                s.peer_map_tiles = *map_tiles;
+                if self.role == Role::Rig && (*map_tiles as usize) > s.tiles_seen.len() {
+                    // The robot holds tiles we never saw (joined late, or they went while stale).
+                    self.request_fetch(&mut s, recv_host_ns, false);
+                }
+                return;
+            }
+            LinkMessage::ClockProbe { seq, t1_ns } => {
+                let _ = self.control.try_send(Control::ReplyProbe { seq: *seq, t1_ns: *t1_ns, t2_ns: recv_host_ns });
+                return;
+            }
+            LinkMessage::ClockReply { seq, t1_ns, t2_ns, t3_ns } => {
+                let ours = s.probes.iter().any(|&(q, t1)| q == *seq && t1 == *t1_ns);
+                if ours {
+                    s.probes.retain(|&(q, _)| q != *seq);
+                    if let Err(e) = s.clock.add(*t1_ns, *t2_ns, *t3_ns, recv_host_ns) {
+                        tracing::debug!("link: clock reply refused: {e}");
+                    }
+                }
+                return;
+            }
+            LinkMessage::Detections { stamp_ns, sent_host_ns, .. } => {
+                let (c, raw) = latency(&s, *sent_host_ns);
+                (latency_ns, raw_latency_ns) = (c, Some(raw));
+                if let Some(c) = c {
+                    s.detections_latency.record(c);
+                }
+                if let (Some(c), _) = latency(&s, *stamp_ns) {
+                    s.detections_age.record(c);
+                }
+            }
+            LinkMessage::MapTile { bytes } => {
+                if let Some((key, version)) = map_tile_id(bytes) {
+                    let v = s.tiles_seen.entry(key).or_insert(version);
+                    *v = (*v).max(version);
+                }
+                if fetched {
+                    s.map_tiles_fetched += 1;
+                }
+            }
+            LinkMessage::RobotPose { .. } => {}
+        }
+        let r = Received { msg, recv_host_ns, latency_ns, raw_latency_ns, fetched };
+        match self.to_caller.try_send(r) {
+            Ok(()) => s.received += 1,
+            Err(_) => s.queue_drops += 1,
+        }
+    }
+
+    /// Asks the task for a map fetch unless one runs, or (when not forced) one started lately.
+    fn request_fetch(&self, s: &mut Shared, now_ns: u64, force: bool) {
+        let recent = now_ns.saturating_sub(s.last_fetch_ns) < self.cfg.map_fetch_timeout_ms.saturating_mul(1_000_000);
+        if s.fetch_in_flight || (!force && recent) {
+            return;
+        }
+        if self.control.try_send(Control::FetchMap).is_ok() {
+            s.fetch_in_flight = true;
+            s.last_fetch_ns = now_ns;
+        }
+    }
+}
+
+/// QoS per kind: heartbeats and clock probes jump every queue (their timing is the point);
+/// people and poses go next and are dropped rather than queued when the link chokes (a newer one
+/// follows); map tiles wait their turn but are never dropped.
+fn qos(msg: &LinkMessage) -> (CongestionControl, Priority, bool) {
+    match msg {
+        LinkMessage::Heartbeat { .. } | LinkMessage::ClockProbe { .. } | LinkMessage::ClockReply { .. } => {
+            (CongestionControl::Drop, Priority::RealTime, true)
+        }
+        LinkMessage::RobotPose { .. } | LinkMessage::Detections { .. } => {
+            (CongestionControl::Drop, Priority::InteractiveHigh, true)
+        }
+        LinkMessage::MapTile { .. } => (CongestionControl::Block, Priority::DataLow, false),
+    }
+}
+
+async fn put(session: &Session, prefix: &str, role: Role, msg: &LinkMessage) -> Result<(), LinkError> {
+    let bytes = encode(msg)?;
+    let (cc, prio, express) = qos(msg);
+    session
+        .put(message_key(prefix, role, msg), bytes)
+        .congestion_control(cc)
+        .priority(prio)
+        .express(express)
+        .await
+        .map_err(|e| LinkError::zenoh("put", e))
+}
+
+/// One end of the link.
+pub struct LinkNode {
+    role: Role,
+    cfg: Arc<LinkConfig>,
+    session: Session,
+    shared: Arc<Mutex<Shared>>,
+    inbox: Inbox,
+    from_peer: mpsc::Receiver<Received>,
+    stop: watch::Sender<bool>,
+    tasks: Vec<JoinHandle<()>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl LinkNode {
+    /// Opens the zenoh session (listening and connecting as configured; endpoints that do not
+    /// answer yet are retried in the background), subscribes to the peer's messages and starts
+    /// heartbeats and clock probes; the robot also answers map queries.
+    pub async fn open(cfg: &LinkConfig, role: Role) -> Result<LinkNode, LinkError> {
+        let zcfg = cfg.zenoh()?;
+        let session = zenoh::open(zcfg).await.map_err(|e| LinkError::zenoh("open", e))?;
+        let cfg = Arc::new(cfg.clone());
+        let health = LinkHealth::new(cfg.health())?;
+        let shared = Arc::new(Mutex::new(Shared {
+            health,
+            clock: ClockOffset::new(cfg.clock_window),
+            probes: VecDeque::new(),
+            heartbeat_latency: LatencyWindow::default(),
+            detections_latency: LatencyWindow::default(),
+            detections_age: LatencyWindow::default(),
+            received: 0,
+            decode_errors: 0,
+            queue_drops: 0,
+            map_fetches: 0,
+            map_tiles_fetched: 0,
+            peer_map_tiles: 0,
+            tiles_seen: HashMap::new(),
+            tiles_held: BTreeMap::new(),
+            fetch_in_flight: false,
+            last_fetch_ns: 0,
+        }));
+        let (to_caller, from_peer) = mpsc::channel(cfg.queue);
+        let (control_tx, control_rx) = mpsc::channel(64);
+        let inbox = Inbox { role, cfg: cfg.clone(), shared: shared.clone(), to_caller, control: control_tx };
+        let sub_inbox = inbox.clone();
+        let subscriber = session
+            .declare_subscriber(sender_wildcard(&cfg.key_prefix, role.peer()))
+            .callback(move |sample: Sample| sub_inbox.on_bytes(&sample.payload().to_bytes(), false))
+            .await
+            .map_err(|e| LinkError::zenoh("declare subscriber", e))?;
+        let (stop, stop_rx) = watch::channel(false);
+        let mut tasks = Vec::new();
+        if role == Role::Robot {
+            let queryable = session
+                .declare_queryable(format!("{}/**", map_key(&cfg.key_prefix)))
+                .await
+                .map_err(|e| LinkError::zenoh("declare map queryable", e))?;
+            tasks.push(tokio::spawn(serve_map(queryable, cfg.key_prefix.clone(), shared.clone(), stop_rx.clone())));
+        }
+        tasks.push(tokio::spawn(run_timers(session.clone(), role, inbox.clone(), control_rx, stop_rx)));
+        Ok(LinkNode { role, cfg, session, shared, inbox, from_peer, stop, tasks, _subscriber: subscriber })
+    }
+
+    pub fn role(&self) -> Role {
+        self.role
+    }
+
+    /// Publishes one message on `<prefix>/<role>/<kind>`. A map tile sent by the robot is also
+    /// kept (newest version per tile) to answer the map queries of rigs that join late.
+    /// Map tiles may wait when the link is congested; everything else is dropped instead.
+    pub async fn publish(&self, msg: &LinkMessage) -> Result<(), LinkError> {
+        if let (Role::Robot, LinkMessage::MapTile { bytes }) = (self.role, msg) {
+            let frame = encode(msg)?;
+            if let Some((key, version)) = map_tile_id(bytes) {
+                let mut s = lock(&self.shared);
+                let newer = s.tiles_held.get(&key).is_none_or(|(v, _)| *v <= version);
+                if newer {
+                    s.tiles_held.insert(key, (version, frame));
+                }
+            }
+        }
+        put(&self.session, &self.cfg.key_prefix, self.role, msg).await
+    }
+
+    /// The next message from the peer; None once the node is closed.
+    pub async fn recv(&mut self) -> Option<Received> {
+        self.from_peer.recv().await
+    }
+
+    /// A message from the peer if one is waiting.
+    pub fn try_recv(&mut self) -> Option<Received> {
+        self.from_peer.try_recv().ok()
+    }
+
+    /// Asks the robot for its whole map now (rig side; the node also does so by itself when the
+    /// link comes up and when the robot holds tiles this node has not seen). The tiles arrive
+    /// through [`recv`](Self::recv) with `fetched` set.
+    pub fn request_map(&self) {
+        let mut s = lock(&self.shared);
+        self.inbox.request_fetch(&mut s, host_now_ns(), true);
+    }
+
+    /// A stamp of the peer's host clock on ours, once the offset is estimated.
+    pub fn peer_to_local_ns(&self, peer_ns: u64) -> Option<u64> {
+        lock(&self.shared).clock.peer_to_local(peer_ns)
+    }
+
+    /// The link's state now, with its counters, clock offset and latency figures.
+    pub fn health(&self) -> LinkReport {
+        let now = host_now_ns();
+        let mut s = lock(&self.shared);
+        s.health.tick(now);
+        LinkReport {
+            state: s.health.state(),
+            silent_ms: s.health.silent_ms(now),
+            stalls: s.health.stalls(),
+            drops: s.health.drops(),
+            resumptions: s.health.resumptions(),
+            heartbeats: s.health.heartbeats(),
+            clock: s.clock.estimate(),
+            heartbeat_latency: s.heartbeat_latency.summary(),
+            detections_latency: s.detections_latency.summary(),
+            detections_age: s.detections_age.summary(),
+            received: s.received,
+            decode_errors: s.decode_errors,
+            queue_drops: s.queue_drops,
+            map_fetches: s.map_fetches,
+            map_tiles_fetched: s.map_tiles_fetched,
+            map_tiles: s.map_tiles(self.role),
+            peer_map_tiles: s.peer_map_tiles,
+        }
+    }
+
+    /// Stops the node's tasks and closes the zenoh session (its listeners and connections).
+    pub async fn close(mut self) -> Result<(), LinkError> {
+        let _ = self.stop.send(true);
+        for t in self.tasks.drain(..) {
+            // Each task checks the stop flag at least every heartbeat; abort covers a stuck one.
+            let abort = t.abort_handle();
+            if tokio::time::timeout(Duration::from_secs(2), t).await.is_err() {
+                abort.abort();
+            }
+        }
+        self.session.close().await.map_err(|e| LinkError::zenoh("close", e))
+    }
+}
+
+impl Drop for LinkNode {
+    fn drop(&mut self) {
+        let _ = self.stop.send(true);
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+/// Heartbeats, clock probes and the work the callbacks hand over (probe replies, map fetches).
+async fn run_timers(
+    session: Session,
+    role: Role,
+    inbox: Inbox,
+    mut control: mpsc::Receiver<Control>,
+    mut stop: watch::Receiver<bool>,
+) {
+    let cfg = inbox.cfg.clone();
+    let prefix = cfg.key_prefix.clone();
+    let mut heartbeat = tokio::time::interval(Duration::from_millis(cfg.heartbeat_ms));
+    heartbeat.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let mut probe = tokio::time::interval(Duration::from_millis(cfg.clock_probe_ms));
+    probe.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let mut fetches = JoinSet::new();
+    let (mut heartbeat_seq, mut probe_seq) = (0u32, 0u32);
+    loop {
+        tokio::select! {
+            _ = stop.changed() => break,
+            _ = heartbeat.tick() => {
+                let now = host_now_ns();
+                let map_tiles = {
+                    let mut s = lock(&inbox.shared);
+                    if let Some(state) = s.health.tick(now) {
+                        tracing::info!("link: {} {state}", role.peer().name());
+                    }
+                    s.map_tiles(role)
+                };
+                let msg = LinkMessage::Heartbeat {
+                    role,
+                    seq: heartbeat_seq,
+                    sent_host_ns: host_now_ns(),
+                    map_tiles: u32::try_from(map_tiles).unwrap_or(u32::MAX),
+                };
+                heartbeat_seq = heartbeat_seq.wrapping_add(1);
+                if let Err(e) = put(&session, &prefix, role, &msg).await {
+                    tracing::debug!("link: heartbeat not sent: {e}");
+                }
+            }
+            _ = probe.tick() => {
+                let t1_ns = host_now_ns();
+                {
+                    let mut s = lock(&inbox.shared);
+                    if s.probes.len() >= 8 {
+                        s.probes.pop_front();
+                    }
+                    s.probes.push_back((probe_seq, t1_ns));
+                }
+                let msg = LinkMessage::ClockProbe { seq: probe_seq, t1_ns };
+                probe_seq = probe_seq.wrapping_add(1);
+                if let Err(e) = put(&session, &prefix, role, &msg).await {
+                    tracing::debug!("link: clock probe not sent: {e}");
+                }
+            }
+            Some(c) = control.recv() => match c {
+                Control::ReplyProbe { seq, t1_ns, t2_ns } => {
+                    let msg = LinkMessage::ClockReply { seq, t1_ns, t2_ns, t3_ns: host_now_ns() };
+                    if let Err(e) = put(&session, &prefix, role, &msg).await {
+                        tracing::debug!("link: clock reply not sent: {e}");
+                    }
+                }
+                Control::FetchMap => {
+                    lock(&inbox.shared).map_fetches += 1;
+                    fetches.spawn(fetch_map(session.clone(), inbox.clone()));
+                }
+            },
+            Some(_) = fetches.join_next(), if !fetches.is_empty() => {}
+        }
+    }
+    fetches.abort_all();
+}
+
+/// Rig: asks the robot's map queryable for every tile and hands them to the caller.
+async fn fetch_map(session: Session, inbox: Inbox) {
+    let timeout = Duration::from_millis(inbox.cfg.map_fetch_timeout_ms);
+    let replies = session
+        .get(format!("{}/**", map_key(&inbox.cfg.key_prefix)))
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(timeout)
+        .await;
+    match replies {
+        Ok(replies) => {
+            let mut tiles = 0usize;
+            // Bounded: the query ends at its timeout at the latest.
+            while let Ok(reply) = replies.recv_async().await {
+                if let Ok(sample) = reply.result() {
+                    inbox.on_bytes(&sample.payload().to_bytes(), true);
+                    tiles += 1;
+                }
+            }
+            tracing::info!("link: map fetch brought {tiles} tiles");
+        }
+        Err(e) => tracing::warn!("link: map fetch failed: {e}"),
+    }
+    lock(&inbox.shared).fetch_in_flight = false;
+}
+
+/// Robot: answers each map query with every tile held, one reply per tile.
+async fn serve_map(
+    queryable: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    prefix: String,
+    shared: Arc<Mutex<Shared>>,
+    mut stop: watch::Receiver<bool>,
+) {
+    loop {
+        let query = tokio::select! {
+            _ = stop.changed() => break,
+            q = queryable.recv_async() => match q {
+                Ok(q) => q,
+                Err(_) => break,
+            },
+        };
+        let tiles: Vec<(TileKey, Vec<u8>)> =
+            lock(&shared).tiles_held.iter().map(|(k, (_, frame))| (*k, frame.clone())).collect();
+        for ((x, y, z), frame) in tiles {
+            let key = format!("{}/{x}/{y}/{z}", map_key(&prefix));
+            if let Err(e) = query.reply(key, frame).await {
+                tracing::debug!("link: map reply failed: {e}");
+                break;
+            }
+        }
+    }
+}

@@ -1,0 +1,176 @@
+//! Robot and rig nodes in one process over tcp/127.0.0.1: every kind arrives, a late rig gets the
+//! whole map, and a lost robot is seen Stale then Lost, then Up again with the map fetched anew.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::time::Duration;
+
+use common::{collect, free_port, rig_cfg, robot_cfg, wait_for, wait_up};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, LinkState, Received, Role};
+use starc_pipeline::align::{encode_tiles, TileMap, Vec3};
+use starc_pipeline::ar::OrientedBox;
+
+/// Map tiles of a 12 m x 4 m floor at `version`: three 4 m tiles.
+fn tiles(version: u32) -> Vec<Vec<u8>> {
+    let mut pts = Vec::new();
+    for i in 0..120 {
+        for j in 0..40 {
+            pts.push(Vec3::new(0.1 * f64::from(i) + 0.05, 0.1 * f64::from(j) + 0.05, 0.02));
+        }
+    }
+    let nrm = vec![Some(Vec3::new(0.0, 0.0, 1.0)); pts.len()];
+    encode_tiles(&pts, &nrm, 4.0, 0.01, version).unwrap().into_iter().map(|(_, b)| b).collect()
+}
+
+fn detections(seq: u32) -> LinkMessage {
+    let now = host_now_ns();
+    LinkMessage::Detections {
+        seq,
+        stamp_ns: now - 30_000_000,
+        scan_last_packet_host_ns: now - 25_000_000,
+        sent_host_ns: now,
+        people: vec![LinkPerson {
+            score: 0.9,
+            bbox: OrientedBox {
+                centre_m: Vector3::new(2.0, 1.0, 0.9),
+                size_m: Vector3::new(0.5, 0.4, 1.8),
+                yaw_rad: 0.3,
+            },
+            points_world: (0..2000).map(|i| [2.0 + (i % 10) as f32 * 0.02, 1.0, (i / 10) as f32 * 0.009]).collect(),
+        }],
+    }
+}
+
+fn count(got: &[Received], f: impl Fn(&Received) -> bool) -> usize {
+    got.iter().filter(|r| f(r)).count()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_kind_arrives_and_decodes() {
+    let port = free_port();
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "rig never saw the robot: {:?}", rig.health());
+    assert!(wait_up(&robot, Duration::from_secs(5)).await, "robot never saw the rig: {:?}", robot.health());
+
+    let pose =
+        Isometry3::from_parts(Translation3::new(1.0, 2.0, 0.3), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7));
+    robot.publish(&LinkMessage::RobotPose { stamp_ns: 123, world_t_lidar: pose }).await.unwrap();
+    let sent_detections = detections(1);
+    robot.publish(&sent_detections).await.unwrap();
+    let tile = tiles(1).remove(0);
+    robot.publish(&LinkMessage::MapTile { bytes: tile.clone() }).await.unwrap();
+
+    let got = collect(&mut rig, Duration::from_secs(5), |g| {
+        count(g, |r| matches!(r.msg, LinkMessage::RobotPose { .. })) > 0
+            && count(g, |r| matches!(r.msg, LinkMessage::Detections { .. })) > 0
+            && count(g, |r| matches!(&r.msg, LinkMessage::MapTile { bytes } if *bytes == tile)) > 0
+    })
+    .await;
+    let pose_back = got.iter().find_map(|r| match r.msg {
+        LinkMessage::RobotPose { stamp_ns, world_t_lidar } => Some((stamp_ns, world_t_lidar)),
+        _ => None,
+    });
+    let (stamp, back) = pose_back.expect("no pose");
+    assert_eq!(stamp, 123);
+    assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
+    let det = got.iter().find(|r| matches!(r.msg, LinkMessage::Detections { .. })).expect("no detections");
+    assert_eq!(det.msg, sent_detections);
+    assert!(det.raw_latency_ns.is_some_and(|l| (0..1_000_000_000).contains(&l)), "{:?}", det.raw_latency_ns);
+    assert!(got.iter().any(|r| matches!(&r.msg, LinkMessage::MapTile { bytes } if *bytes == tile)));
+
+    // Clock probes ran both ways: on one host the offset is near zero, within its own bound.
+    assert!(wait_for(Duration::from_secs(3), || rig.health().clock.is_some() && robot.health().clock.is_some()).await);
+    for node in [&rig, &robot] {
+        let c = node.health().clock.unwrap();
+        assert!(c.offset_ns.unsigned_abs() <= c.uncertainty_ns + 1_000, "{c:?}");
+        assert!(c.rtt_ns < 100_000_000, "{c:?}");
+    }
+    // Heartbeat latencies count once the offset is known (the next heartbeat, 20 ms on).
+    assert!(wait_for(Duration::from_secs(1), || rig.health().heartbeat_latency.is_some_and(|l| l.count > 0)).await);
+    let report = rig.health();
+    assert_eq!(report.decode_errors, 0);
+    assert!(report.detections_latency.is_some() || det.latency_ns.is_none());
+    robot.close().await.unwrap();
+    rig.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_late_rig_gets_the_whole_map() {
+    let port = free_port();
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let sent = tiles(1);
+    assert_eq!(sent.len(), 3);
+    for t in &sent {
+        robot.publish(&LinkMessage::MapTile { bytes: t.clone() }).await.unwrap();
+    }
+    // A newer version of the first tile replaces the old one in what the robot serves.
+    let v2 = tiles(2).remove(0);
+    robot.publish(&LinkMessage::MapTile { bytes: v2.clone() }).await.unwrap();
+    assert_eq!(robot.health().map_tiles, 3);
+
+    let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    let got = collect(&mut rig, Duration::from_secs(5), |g| count(g, |r| r.fetched) >= 3).await;
+    let mut map = TileMap::default();
+    for r in &got {
+        if let LinkMessage::MapTile { bytes } = &r.msg {
+            assert!(r.fetched, "a tile published before the rig joined came as a publication");
+            map.apply(bytes).unwrap();
+        }
+    }
+    assert_eq!(map.tile_count(), 3);
+    assert!(got.iter().any(|r| matches!(&r.msg, LinkMessage::MapTile { bytes } if *bytes == v2)));
+    let report = rig.health();
+    assert!(report.map_fetches >= 1 && report.map_tiles_fetched >= 3, "{report:?}");
+    assert_eq!(report.map_tiles, 3);
+    rig.close().await.unwrap();
+    robot.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wifi_loss_goes_stale_then_lost_and_resumes_with_the_map() {
+    let port = free_port();
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await);
+    let before = tiles(1);
+    for t in &before[..2] {
+        robot.publish(&LinkMessage::MapTile { bytes: t.clone() }).await.unwrap();
+    }
+    let got =
+        collect(&mut rig, Duration::from_secs(5), |g| count(g, |r| matches!(r.msg, LinkMessage::MapTile { .. })) >= 2)
+            .await;
+    assert!(count(&got, |r| matches!(r.msg, LinkMessage::MapTile { .. })) >= 2);
+
+    // The robot goes away (its session closes: the WiFi drops for the rig).
+    robot.close().await.unwrap();
+    let mut seen = Vec::new();
+    let lost = wait_for(Duration::from_secs(5), || {
+        let s = rig.health().state;
+        if seen.last() != Some(&s) {
+            seen.push(s);
+        }
+        s == LinkState::Lost
+    })
+    .await;
+    assert!(lost, "states seen: {seen:?}");
+    assert_eq!(seen, vec![LinkState::Up, LinkState::Stale, LinkState::Lost]);
+    while rig.try_recv().is_some() {}
+
+    // It comes back on the same port with one more tile; the rig resumes and fetches the map.
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    for t in &before {
+        robot.publish(&LinkMessage::MapTile { bytes: t.clone() }).await.unwrap();
+    }
+    assert!(wait_up(&rig, Duration::from_secs(10)).await, "no resumption: {:?}", rig.health());
+    let got = collect(&mut rig, Duration::from_secs(5), |g| count(g, |r| r.fetched) >= 3).await;
+    assert!(count(&got, |r| r.fetched) >= 3, "fetched {} tiles", count(&got, |r| r.fetched));
+    let report = rig.health();
+    assert_eq!((report.stalls, report.drops, report.resumptions), (1, 1, 1), "{report:?}");
+    assert!(report.map_fetches >= 2, "{report:?}");
+    assert_eq!(report.map_tiles, 3);
+    rig.close().await.unwrap();
+    robot.close().await.unwrap();
+}

@@ -1,0 +1,138 @@
+//! TLS with a throwaway CA made by the openssl CLI, and zenoh access control denying one key.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use common::{collect, fast, free_port, rig_cfg, robot_cfg, wait_up};
+use nalgebra::Isometry3;
+use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkState, Role, TlsConfig};
+
+fn openssl(dir: &Path, args: &[&str]) {
+    let out = Command::new("/usr/bin/openssl").args(args).current_dir(dir).output().expect("openssl CLI");
+    assert!(out.status.success(), "openssl {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// A CA (`<name>-ca.pem`) and a leaf for 127.0.0.1 signed by it (`<name>.pem`, `<name>.key`).
+fn make_pki(dir: &Path, name: &str) {
+    let ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"];
+    let ca_key = format!("{name}-ca.key");
+    let ca = format!("{name}-ca.pem");
+    let mut a = vec!["req", "-x509"];
+    a.extend(ec);
+    a.extend(["-keyout", &ca_key, "-out", &ca, "-days", "2", "-subj", "/CN=starc test CA"]);
+    a.extend(["-addext", "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign"]);
+    openssl(dir, &a);
+    let key = format!("{name}.key");
+    let csr = format!("{name}.csr");
+    let mut a = vec!["req"];
+    a.extend(ec);
+    a.extend(["-keyout", &key, "-out", &csr, "-subj", "/CN=starc-robot"]);
+    openssl(dir, &a);
+    let ext = format!("{name}.ext");
+    std::fs::write(
+        dir.join(&ext),
+        "subjectAltName=IP:127.0.0.1\nbasicConstraints=critical,CA:FALSE\nkeyUsage=critical,digitalSignature\nextendedKeyUsage=serverAuth,clientAuth\n",
+    )
+    .unwrap();
+    let pem = format!("{name}.pem");
+    openssl(
+        dir,
+        &[
+            "x509",
+            "-req",
+            "-in",
+            &csr,
+            "-CA",
+            &ca,
+            "-CAkey",
+            &ca_key,
+            "-CAcreateserial",
+            "-out",
+            &pem,
+            "-days",
+            "2",
+            "-extfile",
+            &ext,
+        ],
+    );
+}
+
+fn tls_cfg(dir: &Path, listen: Vec<String>, connect: Vec<String>, ca: &str, leaf: &str) -> LinkConfig {
+    LinkConfig {
+        tls: Some(TlsConfig {
+            root_ca: dir.join(format!("{ca}-ca.pem")),
+            cert: Some(dir.join(format!("{leaf}.pem"))),
+            key: Some(dir.join(format!("{leaf}.key"))),
+            mutual: true,
+            verify_name: true,
+        }),
+        ..fast(listen, connect)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tls_link_with_a_private_ca_and_a_stranger_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    make_pki(dir.path(), "good");
+    make_pki(dir.path(), "other");
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let robot =
+        LinkNode::open(&tls_cfg(dir.path(), vec![ep.clone()], vec![], "good", "good"), Role::Robot).await.unwrap();
+
+    // A rig trusting another CA (and holding a certificate from it) never gets a link.
+    let stranger =
+        LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep.clone()], "other", "other"), Role::Rig).await.unwrap();
+    assert!(!wait_up(&stranger, Duration::from_millis(1500)).await, "{:?}", stranger.health());
+    assert_eq!(robot.health().state, LinkState::Lost);
+    stranger.close().await.unwrap();
+
+    // The rig with the right CA does, and messages flow.
+    let mut rig = LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep], "good", "good"), Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
+    let pose = LinkMessage::RobotPose { stamp_ns: host_now_ns(), world_t_lidar: Isometry3::identity() };
+    robot.publish(&pose).await.unwrap();
+    let got = collect(&mut rig, Duration::from_secs(5), |g| !g.is_empty()).await;
+    assert_eq!(got.first().map(|r| &r.msg), Some(&pose));
+    rig.close().await.unwrap();
+    robot.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn access_control_denies_one_key() {
+    let dir = tempfile::tempdir().unwrap();
+    // The rig refuses robot poses coming in; everything else is allowed.
+    let acl = r#"{
+      access_control: {
+        enabled: true,
+        default_permission: "allow",
+        rules: [{ id: "no_pose", messages: ["put"], flows: ["ingress"], permission: "deny",
+                  key_exprs: ["starc/robot/pose"] }],
+        subjects: [{ id: "everyone" }],
+        policies: [{ rules: ["no_pose"], subjects: ["everyone"] }],
+      },
+    }"#;
+    let path = dir.path().join("rig_zenoh.json5");
+    std::fs::write(&path, acl).unwrap();
+    let port = free_port();
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let mut rig = LinkNode::open(&LinkConfig { zenoh_config: Some(path), ..rig_cfg(port) }, Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
+    for i in 0..5 {
+        robot.publish(&LinkMessage::RobotPose { stamp_ns: i, world_t_lidar: Isometry3::identity() }).await.unwrap();
+    }
+    let probe =
+        LinkMessage::Detections { seq: 9, stamp_ns: 1, scan_last_packet_host_ns: 2, sent_host_ns: 3, people: vec![] };
+    robot.publish(&probe).await.unwrap();
+    // Detections sent after the poses arrive; give stragglers 300 ms more.
+    let mut got = collect(&mut rig, Duration::from_secs(5), |g| g.iter().any(|r| r.msg == probe)).await;
+    got.extend(collect(&mut rig, Duration::from_millis(300), |_| false).await);
+    assert!(got.iter().any(|r| r.msg == probe), "detections did not arrive");
+    assert!(!got.iter().any(|r| matches!(r.msg, LinkMessage::RobotPose { .. })), "a denied pose arrived");
+    rig.close().await.unwrap();
+    robot.close().await.unwrap();
+}

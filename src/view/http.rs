@@ -1,0 +1,211 @@
+//! The browser live view, served by the rig node with tokio alone (a few routes of HTTP/1.1 GET
+//! do not need a web framework).
+//!
+//! Routes: `/` a self-contained page (no external assets) with the stream and the status line;
+//! `/frame.png` the latest frame; `/status.json` its status; `/stream` every new frame as a
+//! `multipart/x-mixed-replace` stream of PNG parts, which Chrome and Firefox both render in an
+//! `<img>` (the way IP cameras stream MJPEG). Each response closes its connection.
+//!
+//! Bounds: at most [`MAX_CLIENTS`] connections at once (more get 503), request heads of at most
+//! 8 KiB (431), 5 s to send one, 10 s to take any one write; anything else the server cannot
+//! answer gets 400, 404 or 405.
+
+use super::error::ViewError;
+use super::hub::{SnapshotReceiver, ViewHub, ViewSnapshot};
+use super::request::{head_end, parse_head, Method, MAX_HEAD_BYTES};
+use super::Shutdown;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::Semaphore;
+use tokio::task::JoinHandle;
+
+/// Connections served at once (a stream holds one for as long as the page is open).
+pub const MAX_CLIENTS: usize = 8;
+const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+const BOUNDARY: &str = "starcframe";
+
+const INDEX_HTML: &str = include_str!("index.html");
+
+/// Binds `bind` and serves the live view until `shutdown` fires. Returns the address actually
+/// bound (port 0 picks a free one) and the server's task.
+pub async fn serve_http(
+    bind: SocketAddr,
+    hub: ViewHub,
+    shutdown: Shutdown,
+) -> Result<(SocketAddr, JoinHandle<()>), ViewError> {
+    let listener =
+        TcpListener::bind(bind).await.map_err(|e| ViewError::io(format!("binding the live view on {bind}"), e))?;
+    let local = listener.local_addr().map_err(|e| ViewError::io("reading the live view's address", e))?;
+    tracing::info!("live view on http://{local}/");
+    let task = tokio::spawn(accept_loop(listener, hub, shutdown));
+    Ok((local, task))
+}
+
+async fn accept_loop(listener: TcpListener, hub: ViewHub, mut shutdown: Shutdown) {
+    let slots = Arc::new(Semaphore::new(MAX_CLIENTS));
+    loop {
+        let accepted = tokio::select! {
+            _ = super::wait_shutdown(&mut shutdown) => break,
+            a = listener.accept() => a,
+        };
+        let (stream, peer) = match accepted {
+            Ok(a) => a,
+            Err(e) => {
+                // Out of file descriptors and the like: back off instead of spinning.
+                tracing::warn!("live view: accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let Ok(permit) = slots.clone().try_acquire_owned() else {
+            // One non-blocking write: a full server must not queue work for the clients it refuses.
+            let _ = stream.try_write(&status_response(503, "Service Unavailable", "too many viewers\n"));
+            continue;
+        };
+        let (hub, shutdown) = (hub.clone(), shutdown.clone());
+        tokio::spawn(async move {
+            if let Err(e) = serve_connection(stream, hub, shutdown).await {
+                tracing::debug!("live view: {peer}: {e}");
+            }
+            drop(permit);
+        });
+    }
+}
+
+async fn serve_connection(mut stream: TcpStream, hub: ViewHub, shutdown: Shutdown) -> std::io::Result<()> {
+    let mut buf = Vec::with_capacity(1024);
+    let head = tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut stream, &mut buf)).await;
+    let parsed = match head {
+        Err(_) => return Ok(()),
+        Ok(Err(e)) => return Err(e),
+        Ok(Ok(Err(e))) => Err(e),
+        Ok(Ok(Ok(end))) => parse_head(buf.get(..end).unwrap_or_default()),
+    };
+    let request = match parsed {
+        Ok(r) => r,
+        Err(e) => {
+            let (code, reason) = e.status();
+            return write_all(&mut stream, &status_response(code, reason, &format!("{reason}\n"))).await;
+        }
+    };
+    let head_only = request.method == Method::Head;
+    let response = match request.path.as_str() {
+        "/" | "/index.html" => ok_response("text/html; charset=utf-8", INDEX_HTML.as_bytes(), head_only),
+        "/frame.png" => match hub.latest() {
+            Some(s) => ok_response("image/png", &s.png, head_only),
+            None => status_response(503, "Service Unavailable", "no frame yet\n"),
+        },
+        "/status.json" => {
+            let body = status_json(hub.latest().as_deref());
+            ok_response("application/json", body.as_bytes(), head_only)
+        }
+        "/stream" => {
+            if head_only {
+                stream_head()
+            } else {
+                return stream_frames(stream, hub.subscribe(), shutdown).await;
+            }
+        }
+        _ => status_response(404, "Not Found", "not found\n"),
+    };
+    write_all(&mut stream, &response).await?;
+    let _ = stream.shutdown().await;
+    Ok(())
+}
+
+/// Reads until the end of the head; `Ok(Err(..))` for a head the server refuses.
+async fn read_head(
+    stream: &mut TcpStream,
+    buf: &mut Vec<u8>,
+) -> std::io::Result<Result<usize, super::request::RequestError>> {
+    let mut chunk = [0u8; 1024];
+    loop {
+        match head_end(buf) {
+            Ok(Some(end)) => return Ok(Ok(end)),
+            Ok(None) => {}
+            Err(e) => return Ok(Err(e)),
+        }
+        let n = stream.read(&mut chunk).await?;
+        if n == 0 {
+            return Err(std::io::ErrorKind::UnexpectedEof.into());
+        }
+        let room = MAX_HEAD_BYTES.saturating_sub(buf.len());
+        buf.extend_from_slice(chunk.get(..n.min(room)).unwrap_or_default());
+    }
+}
+
+/// The status of the latest frame, or `{"frame": null}` before the first.
+pub fn status_json(snapshot: Option<&ViewSnapshot>) -> String {
+    match snapshot {
+        Some(s) => serde_json::to_string(&s.status).unwrap_or_else(|_| "{}".into()),
+        None => "{\"frame\":null}".into(),
+    }
+}
+
+async fn write_all(stream: &mut TcpStream, bytes: &[u8]) -> std::io::Result<()> {
+    match tokio::time::timeout(WRITE_TIMEOUT, stream.write_all(bytes)).await {
+        Ok(r) => r,
+        Err(_) => Err(std::io::ErrorKind::TimedOut.into()),
+    }
+}
+
+fn ok_response(content_type: &str, body: &[u8], head_only: bool) -> Vec<u8> {
+    let mut out = format!(
+        "HTTP/1.1 200 OK\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\nCache-Control: no-store\r\n\
+         Connection: close\r\n\r\n",
+        body.len()
+    )
+    .into_bytes();
+    if !head_only {
+        out.extend_from_slice(body);
+    }
+    out
+}
+
+fn status_response(code: u16, reason: &str, body: &str) -> Vec<u8> {
+    format!(
+        "HTTP/1.1 {code} {reason}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\n\
+         Connection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .into_bytes()
+}
+
+fn stream_head() -> Vec<u8> {
+    format!(
+        "HTTP/1.1 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary={BOUNDARY}\r\n\
+         Cache-Control: no-store\r\nConnection: close\r\n\r\n"
+    )
+    .into_bytes()
+}
+
+/// Writes the latest frame, then each new one, until the viewer leaves, stalls past the write
+/// timeout, or the server shuts down. Each part is followed at once by the next boundary:
+/// browsers show a part only once its closing boundary arrives.
+async fn stream_frames(
+    mut stream: TcpStream,
+    mut frames: SnapshotReceiver,
+    mut shutdown: Shutdown,
+) -> std::io::Result<()> {
+    let mut head = stream_head();
+    head.extend_from_slice(format!("--{BOUNDARY}\r\n").as_bytes());
+    write_all(&mut stream, &head).await?;
+    loop {
+        let latest = frames.borrow_and_update().clone();
+        if let Some(s) = latest {
+            let mut part = format!("Content-Type: image/png\r\nContent-Length: {}\r\n\r\n", s.png.len()).into_bytes();
+            part.reserve(s.png.len() + BOUNDARY.len() + 8);
+            part.extend_from_slice(&s.png);
+            part.extend_from_slice(format!("\r\n--{BOUNDARY}\r\n").as_bytes());
+            write_all(&mut stream, &part).await?;
+        }
+        tokio::select! {
+            _ = super::wait_shutdown(&mut shutdown) => return Ok(()),
+            changed = frames.changed() => if changed.is_err() { return Ok(()) },
+        }
+    }
+}

@@ -1,0 +1,109 @@
+//! The latest AR frame, shared by every live view.
+//!
+//! The renderer calls [`ViewHub::publish`] once per frame; the frame is PNG-encoded there, once,
+//! and stored with its status in a `tokio::sync::watch` slot. Viewers read the newest snapshot
+//! when they are ready for one: a slow browser or display skips frames and never holds up the
+//! renderer (publishing is a slot swap, never a wait on a viewer).
+
+use super::error::ViewError;
+use serde::{Deserialize, Serialize};
+use starc_pipeline::ar::ArFrame;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use tokio::sync::watch;
+
+/// What the status line of every view shows, and `/status.json` serves.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ViewStatus {
+    /// Whether the responder is aligned to the robot's map (people are drawn only then).
+    pub aligned: bool,
+    /// Age of the newest detection at render time, if there is one.
+    pub detection_age_ms: Option<f64>,
+    /// Link state to the robot as the node shows it ("OK", "LOST 2.1 S").
+    pub link: String,
+    /// People drawn in this frame.
+    pub people: usize,
+    /// The renderer's frame counter.
+    pub frame_seq: u64,
+    /// When the frame was rendered (ns on the node's clock, PTP on the rig).
+    pub stamp_ns: u64,
+}
+
+/// One published frame: the raw image (for the framebuffer), its PNG (for the browser, PNG
+/// files and Foxglove) and its status.
+#[derive(Debug)]
+pub struct ViewSnapshot {
+    pub frame: ArFrame,
+    pub png: Arc<[u8]>,
+    pub status: ViewStatus,
+    /// How long the PNG encode took, in nanoseconds.
+    pub encode_ns: u64,
+}
+
+/// The slot viewers watch: `None` until the first frame.
+pub type SnapshotReceiver = watch::Receiver<Option<Arc<ViewSnapshot>>>;
+
+/// Cheap to clone; every clone publishes into (and watches) the same slot.
+#[derive(Clone)]
+pub struct ViewHub {
+    tx: Arc<watch::Sender<Option<Arc<ViewSnapshot>>>>,
+    published: Arc<AtomicU64>,
+}
+
+impl Default for ViewHub {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ViewHub {
+    pub fn new() -> Self {
+        let (tx, _) = watch::channel(None);
+        Self { tx: Arc::new(tx), published: Arc::new(AtomicU64::new(0)) }
+    }
+
+    /// Encodes `frame` as PNG and makes it (with `status`) the latest snapshot. A frame whose
+    /// buffer does not match its size is refused, so viewers can index it without checks failing.
+    pub fn publish(&self, frame: &ArFrame, status: ViewStatus) -> Result<Arc<ViewSnapshot>, ViewError> {
+        check_frame(frame)?;
+        let t0 = Instant::now();
+        let png: Arc<[u8]> = frame.to_png()?.into();
+        let encode_ns = u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        let snapshot = Arc::new(ViewSnapshot { frame: frame.clone(), png, status, encode_ns });
+        // send_replace stores the value even while nobody watches: a viewer that connects
+        // later still gets the latest frame.
+        self.tx.send_replace(Some(snapshot.clone()));
+        self.published.fetch_add(1, Ordering::Relaxed);
+        Ok(snapshot)
+    }
+
+    /// The newest snapshot, if any frame was published.
+    pub fn latest(&self) -> Option<Arc<ViewSnapshot>> {
+        self.tx.borrow().clone()
+    }
+
+    /// A receiver that wakes on every publish (coalescing frames the viewer was too slow for).
+    pub fn subscribe(&self) -> SnapshotReceiver {
+        self.tx.subscribe()
+    }
+
+    /// Frames published so far.
+    pub fn published(&self) -> u64 {
+        self.published.load(Ordering::Relaxed)
+    }
+}
+
+/// `width * height * 3 == rgb.len()`, without overflow.
+pub fn check_frame(frame: &ArFrame) -> Result<(), ViewError> {
+    let expected = (frame.width as usize).checked_mul(frame.height as usize).and_then(|n| n.checked_mul(3));
+    match expected {
+        Some(n) if n == frame.rgb.len() && n > 0 => Ok(()),
+        _ => Err(ViewError::BadFrame {
+            width: frame.width,
+            height: frame.height,
+            bytes: frame.rgb.len(),
+            expected: expected.unwrap_or(usize::MAX),
+        }),
+    }
+}
