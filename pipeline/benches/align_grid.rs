@@ -188,6 +188,7 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
     let mut attempts_hist = [0usize; 8];
     let mut probe_spread: Vec<(f64, f64, f64)> = Vec::new();
     let mut hops = 0usize;
+    let (mut wrong_accepted, mut ambiguous) = (0usize, 0usize);
     let mut probe_iters: Vec<f64> = Vec::new();
     for (si, &shift) in SHIFTS_M.iter().enumerate() {
         for y in 0..24 {
@@ -199,6 +200,13 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
             let cpu_ms = thread_cpu_ms() - c0;
             let (err_m, err_deg) = pose_error(&r.pose, truth);
             let ok = r.accepted && err_m < TOL_M && err_deg < TOL_DEG;
+            let close = err_m < TOL_M && err_deg < TOL_DEG;
+            if r.accepted && !close {
+                wrong_accepted += 1;
+            }
+            if r.attempts.iter().any(|a| a.ambiguous) {
+                ambiguous += 1;
+            }
             if verbose || !ok {
                 println!(
                     "  trial yaw {yaw:+5.0} shift {shift:.2}: {} err {:.2} cm {:.3} deg {:.1} ms (seeds {:.1} ms) attempts {} best seed {:+.0} deg, degeneracy {:.4}{}",
@@ -231,6 +239,12 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
                         a.metrics.degeneracy_index,
                         a.accepted
                     );
+                    for p in &a.alternatives {
+                        println!(
+                            "      alternative seed {:+.0} deg: {:.2} m {:.2} deg away, rms {:.4}, inliers {:.3}",
+                            p.yaw_deg, p.moved_m, p.moved_deg, p.rms_residual_m, p.inlier_ratio
+                        );
+                    }
                     for p in &a.probes {
                         println!(
                             "      probe ({:+.2}, {:+.2}) m {:+.1} deg: moved {:.2} cm {:.3} deg, rms {:.4}, inliers {:.3}",
@@ -313,6 +327,10 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
         summarize(peer, &pick(outcomes));
     }
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!(
+        "accepted but wrong (beyond {} cm or {TOL_DEG} deg): {wrong_accepted}; trials with an attempt rejected as ambiguous: {ambiguous}",
+        TOL_M * 100.0
+    );
     println!("load average at the end: {}", load.split_whitespace().take(3).collect::<Vec<_>>().join(" "));
     println!(
         "full attempts per trial (1..): {:?}; peers' median time / ours: {}",

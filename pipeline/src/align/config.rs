@@ -89,6 +89,13 @@ pub struct AlignConfig {
     pub verify_agree_deg: f64,
     pub verify_margin: f64,
     pub verify_hops: u32,
+    /// Ambiguity check of an accepted result in the seed search: this many more distinct seeds
+    /// are refined; one that fits about as well or better elsewhere (RMS at most `ambiguity_margin`
+    /// (a share) above the result's, inlier ratio at most `ambiguity_inlier_margin` below) rejects
+    /// the result. 0: off.
+    pub ambiguity_seeds: usize,
+    pub ambiguity_margin: f64,
+    pub ambiguity_inlier_margin: f64,
 }
 
 impl Default for AlignConfig {
@@ -131,6 +138,9 @@ impl Default for AlignConfig {
             verify_agree_deg: 0.2,
             verify_margin: 0.1,
             verify_hops: 2,
+            ambiguity_seeds: 2,
+            ambiguity_margin: 0.25,
+            ambiguity_inlier_margin: 0.01,
         }
     }
 }

@@ -27,6 +27,11 @@ pub struct IcpResult {
     pub inlier_ratio: f64,
     pub update_norm: f64,
     pub degeneracy_index: f64,
+    /// The normalised information matrix behind the degeneracy index (target frame, rotations
+    /// about `info_centre`, scaled by `info_radius_m`).
+    pub information: Matrix6<f64>,
+    pub info_centre: Vec3,
+    pub info_radius_m: f64,
     pub correspondences: usize,
 }
 
@@ -104,25 +109,30 @@ pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &Icp
     } else {
         (pairs.iter().map(|x| x.r * x.r).sum::<f64>() / pairs.len() as f64).sqrt()
     };
+    let info = information(&pairs);
     IcpResult {
         pose,
         iterations,
         rms_residual_m,
         inlier_ratio: if source.is_empty() { 0.0 } else { inliers as f64 / source.len() as f64 },
         update_norm,
-        degeneracy_index: degeneracy_index(&pairs),
+        degeneracy_index: info.as_ref().map_or(0.0, |i| SymmetricEigen::new(i.0).eigenvalues.min().max(0.0)),
+        information: info.as_ref().map_or_else(Matrix6::zeros, |i| i.0),
+        info_centre: info.as_ref().map_or_else(Vec3::zeros, |i| i.1),
+        info_radius_m: info.as_ref().map_or(0.0, |i| i.2),
         correspondences: pairs.len(),
     }
 }
 
-/// Smallest eigenvalue of the point-to-plane information matrix `Σ JᵀJ / N`, made unit-free:
-/// rotations are taken about the centroid of the matched points and scaled by their RMS distance
-/// from it, so every column of J is at most 1 in size and the index lies in [0, 1/3]. Near 0, some
-/// direction (a corridor's axis, a rotation about a lone wall's normal) is not constrained by the
-/// geometry; a box-like room gives about 0.05-0.2.
-fn degeneracy_index(pairs: &[Pair]) -> f64 {
+/// The point-to-plane information matrix `Σ JᵀJ / N`, made unit-free: rotations are taken about
+/// the centroid of the matched points and scaled by their RMS distance from it, so every column of
+/// J is at most 1 in size and its eigenvalues lie in [0, 1/3]. The smallest is the degeneracy
+/// index: near 0, some direction (a corridor's axis, a rotation about a lone wall's normal) is
+/// not constrained by the geometry; a box-like room gives about 0.05-0.2. Returns the matrix,
+/// the centroid and the RMS radius; `None` with fewer than 6 pairs.
+fn information(pairs: &[Pair]) -> Option<(Matrix6<f64>, Vec3, f64)> {
     if pairs.len() < 6 {
-        return 0.0;
+        return None;
     }
     let n = pairs.len() as f64;
     let centroid = pairs.iter().map(|p| p.q).sum::<Vec3>() / n;
@@ -134,5 +144,5 @@ fn degeneracy_index(pairs: &[Pair]) -> f64 {
         h += j * j.transpose();
     }
     h /= n;
-    SymmetricEigen::new(h).eigenvalues.min().max(0.0)
+    Some((h, centroid, radius))
 }

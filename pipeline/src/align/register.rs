@@ -27,6 +27,13 @@ pub struct AlignMetrics {
     pub degeneracy_index: f64,
     /// Correspondences ICP kept at the result.
     pub correspondences: usize,
+    /// The matrix behind the degeneracy index, expressed in the SOURCE frame (the rig's):
+    /// row-major 6x6 over (rotation about `information_centre_m` times `information_radius_m`,
+    /// translation). Its eigenvectors say which directions the result pins down and how well;
+    /// `pose::Constraint::from_rows` turns it into a per-direction drift correction.
+    pub information: [[f64; 6]; 6],
+    pub information_centre_m: [f64; 3],
+    pub information_radius_m: f64,
 }
 
 /// One seed of the search after its coarse refinement (the first `seed_levels` NDT levels on the
@@ -72,7 +79,12 @@ pub struct Attempt {
     pub probes: Vec<Probe>,
     /// Times the check moved the result to a better neighbouring minimum.
     pub verify_hops: u32,
+    /// Time of the consistency and ambiguity checks.
     pub verify_ms: f64,
+    /// The ambiguity check's other seeds, refined (`ambiguity_seeds`).
+    pub alternatives: Vec<Probe>,
+    /// Rejected because another seed fits about as well elsewhere.
+    pub ambiguous: bool,
 }
 
 /// ICP re-run from a start perturbed off an attempt's result (the consistency check).
@@ -180,7 +192,8 @@ impl Aligner {
             let mut tried: Vec<Isometry3<f64>> = Vec::new();
             self.try_seeds(&seeds, &ndt_source, &icp_source, first_level, &mut tried, &mut attempts);
             // Nothing passed from the guess's position: search again at positions around it.
-            if !attempts.iter().any(|a| a.accepted) && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
+            let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
+            if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
                 let t2 = Instant::now();
                 let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
                 seed_ms += ms_since(t2);
@@ -232,12 +245,101 @@ impl Aligner {
             }
             tried.push(s.pose);
             let after_seeds = (first_level + c.seed_levels).min(self.grids.len().saturating_sub(1));
-            let a = self.attempt(ndt_source, icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
+            let mut a = self.attempt(ndt_source, icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
             let done = a.accepted;
+            if done && c.ambiguity_seeds > 0 {
+                self.check_ambiguity(seeds, ndt_source, icp_source, after_seeds, tried, &mut a);
+            }
+            let stop = done || a.ambiguous;
             attempts.push(a);
-            if done {
+            if stop {
                 break;
             }
+        }
+    }
+
+    /// Ambiguity check of an accepted attempt: the next `ambiguity_seeds` distinct seeds of the
+    /// ranking, each refined (the remaining NDT levels, then ICP on the thinned source), must not
+    /// land elsewhere with a fit about as good or better (RMS at most `ambiguity_margin` above,
+    /// inlier ratio at most `ambiguity_inlier_margin` below, on the same thinned points): a corridor or a repeated structure fits in several places, and a place the map lacks
+    /// can fit somewhere else; either way the first good fit is a coin toss, so it is rejected.
+    fn check_ambiguity(
+        &self,
+        seeds: &[Seed],
+        ndt_source: &[Vec3],
+        icp_source: &[Vec3],
+        first_level: usize,
+        tried: &[Isometry3<f64>],
+        a: &mut Attempt,
+    ) {
+        let c = &self.config;
+        let t0 = Instant::now();
+        let source = thin(icp_source.to_vec(), c.verify_max_points);
+        let params = self.icp_params();
+        let here = icp::refine(&self.icp_target, &source, a.pose, &IcpParams { max_iterations: 0, ..params });
+        let distinct = |p: &Isometry3<f64>, q: &Isometry3<f64>| {
+            let (dt, da) = super::geometry::pose_error(p, q);
+            dt >= 0.5 || da >= 5.0
+        };
+        let mut checked: Vec<Isometry3<f64>> = Vec::new();
+        for s in seeds {
+            if a.alternatives.len() >= c.ambiguity_seeds {
+                break;
+            }
+            if !distinct(&s.pose, &a.pose)
+                || tried.iter().any(|t| !distinct(t, &s.pose))
+                || checked.iter().any(|t| !distinct(t, &s.pose))
+            {
+                continue;
+            }
+            checked.push(s.pose);
+            let mut pose = s.pose;
+            for grid in self.grids.iter().skip(first_level) {
+                pose = ndt::refine_level(grid, ndt_source, pose, c.ndt_max_iterations).pose;
+            }
+            let r = icp::refine(&self.icp_target, &source, pose, &params);
+            let (moved_m, moved_deg) = super::geometry::pose_error(&a.pose, &r.pose);
+            a.alternatives.push(Probe {
+                shift_m: s.shift_m,
+                yaw_deg: s.yaw_offset_deg,
+                moved_m,
+                moved_deg,
+                rms_residual_m: r.rms_residual_m,
+                inlier_ratio: r.inlier_ratio,
+                iterations: r.iterations,
+                pose: r.pose,
+            });
+            let as_good = distinct(&a.pose, &r.pose)
+                && r.rms_residual_m <= here.rms_residual_m * (1.0 + c.ambiguity_margin)
+                && r.inlier_ratio >= here.inlier_ratio - c.ambiguity_inlier_margin;
+            if as_good {
+                a.ambiguous = true;
+                a.accepted = false;
+                a.rejected_because.push(format!(
+                    "ambiguous: seed yaw {:+.0} deg settles {:.2} m / {:.1} deg away with a fit as good (rms {:.4} vs {:.4} m, inliers {:.3} vs {:.3})",
+                    s.yaw_offset_deg,
+                    moved_m,
+                    moved_deg,
+                    r.rms_residual_m,
+                    here.rms_residual_m,
+                    r.inlier_ratio,
+                    here.inlier_ratio
+                ));
+                break;
+            }
+        }
+        a.verify_ms += ms_since(t0);
+    }
+
+    fn icp_params(&self) -> IcpParams {
+        let c = &self.config;
+        IcpParams {
+            max_correspondence_m: c.icp_max_correspondence_m,
+            trim_ratio: c.icp_trim_ratio,
+            huber_m: c.icp_huber_m,
+            max_iterations: c.icp_max_iterations,
+            converged_update: c.icp_converged_update,
+            inlier_distance_m: c.inlier_distance_m,
         }
     }
 
@@ -371,14 +473,7 @@ impl Aligner {
         }
         let ndt_ms = ms_since(t0);
         let t1 = Instant::now();
-        let params = IcpParams {
-            max_correspondence_m: c.icp_max_correspondence_m,
-            trim_ratio: c.icp_trim_ratio,
-            huber_m: c.icp_huber_m,
-            max_iterations: c.icp_max_iterations,
-            converged_update: c.icp_converged_update,
-            inlier_distance_m: c.inlier_distance_m,
-        };
+        let params = self.icp_params();
         let mut r = icp::refine(&self.icp_target, icp_source, pose, &params);
         let icp_ms = ms_since(t1);
         let mut rejected_because = self.rejections(&metrics_of(&r));
@@ -439,6 +534,8 @@ impl Aligner {
             probes,
             verify_hops,
             verify_ms,
+            alternatives: Vec::new(),
+            ambiguous: false,
         }
     }
 
@@ -504,7 +601,23 @@ impl Aligner {
 }
 
 fn metrics_of(r: &icp::IcpResult) -> AlignMetrics {
+    // Into the source frame: J_target = B J_source with B = diag(R, R), so H_source = Bᵀ H B.
+    let rot = r.pose.rotation.to_rotation_matrix().into_inner();
+    let mut b = nalgebra::Matrix6::zeros();
+    b.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
+    b.fixed_view_mut::<3, 3>(3, 3).copy_from(&rot);
+    let h = b.transpose() * r.information * b;
+    let mut information = [[0.0; 6]; 6];
+    for (i, row) in information.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = h[(i, j)];
+        }
+    }
+    let centre = r.pose.inverse_transform_point(&nalgebra::Point3::from(r.info_centre)).coords;
     AlignMetrics {
+        information,
+        information_centre_m: [centre.x, centre.y, centre.z],
+        information_radius_m: r.info_radius_m,
         rms_residual_m: r.rms_residual_m,
         inlier_ratio: r.inlier_ratio,
         update_norm: r.update_norm,

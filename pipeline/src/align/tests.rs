@@ -111,7 +111,50 @@ fn synthetic_known_transform() {
     let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
     let report = aligner.align(&source, &Isometry3::identity());
     assert_close(&report, &truth, "synthetic");
-    assert!(report.best().unwrap().metrics.rms_residual_m < 0.01);
+    let best = report.best().unwrap();
+    assert!(best.metrics.rms_residual_m < 0.01);
+    // The consistency check ran (six probes, all back at the result) and did not move it; the
+    // ambiguity check refined other seeds and found none as good.
+    assert_eq!((best.probes.len(), best.verify_hops), (6, 0));
+    assert!(best.probes.iter().all(|p| p.moved_m < 0.02), "{:?}", best.probes);
+    assert!(!best.alternatives.is_empty() && !best.ambiguous);
+    // The information matrix is reported in the source frame: same eigenvalues, so its smallest
+    // is the degeneracy index.
+    let info = nalgebra::Matrix6::from_fn(|i, j| best.metrics.information[i][j]);
+    let min = nalgebra::SymmetricEigen::new(info).eigenvalues.min();
+    assert!((min - best.metrics.degeneracy_index).abs() < 1e-9, "{min} vs {}", best.metrics.degeneracy_index);
+}
+
+#[test]
+fn symmetric_room_is_ambiguous_not_accepted() {
+    // A bare box room: turned by 180 deg it fits exactly as well, so no answer can be trusted.
+    let mut target = Vec::new();
+    for i in 0..=100 {
+        for j in 0..=30 {
+            let (a, b) = (-5.0 + f64::from(i) * 0.1, f64::from(j) * 0.1);
+            target.push(Vec3::new(a, -3.0, b));
+            target.push(Vec3::new(a, 3.0, b));
+            target.push(Vec3::new(-5.0, a * 0.6, b));
+            target.push(Vec3::new(5.0, a * 0.6, b));
+        }
+        for j in 0..=60 {
+            let (a, b) = (-5.0 + f64::from(i) * 0.1, -3.0 + f64::from(j) * 0.1);
+            target.push(Vec3::new(a, b, 0.0));
+            target.push(Vec3::new(a, b, 3.0));
+        }
+    }
+    let truth =
+        Isometry3::from_parts(Translation3::new(0.3, -0.2, 0.0), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3));
+    let inv = truth.inverse();
+    let source: Vec<Vec3> = target.iter().map(|p| (inv * Point3::from(*p)).coords).collect();
+    let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
+    let report = aligner.align(&source, &Isometry3::identity());
+    assert!(!report.accepted, "accepted {:?}", report.best().map(|a| &a.metrics));
+    assert!(report.attempts.iter().any(|a| a.ambiguous), "{:?}", report.failure);
+    assert!(report.failure.as_deref().is_some_and(|f| f.contains("ambiguous")), "{:?}", report.failure);
+    // With the check off the same search accepts one of the two: a coin toss.
+    let off = Aligner::new(&target, AlignConfig { ambiguity_seeds: 0, ..AlignConfig::default() }).unwrap();
+    assert!(off.align(&source, &Isometry3::identity()).accepted);
 }
 
 #[test]

@@ -12,7 +12,7 @@ mod buffer;
 mod world;
 
 pub use buffer::PoseBuffer;
-pub use world::{CorrectionStep, RegistrationOutcome, WorldPose, WorldPoseConfig, WorldPoseState};
+pub use world::{Constraint, CorrectionStep, RegistrationOutcome, WorldPose, WorldPoseConfig, WorldPoseState};
 
 #[cfg(test)]
 mod tests;

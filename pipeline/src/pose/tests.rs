@@ -147,3 +147,59 @@ fn config_example_loads_and_is_checked() {
     assert!(WorldPoseConfig::from_toml("max_step_m = 0\n").is_err());
     assert!(WorldPoseConfig::from_toml("bogus = 1\n").is_err());
 }
+
+/// Information that pins down everything but translation along the rig's x (a hall's axis).
+fn hall_constraint() -> Constraint {
+    let mut rows = [[0.0; 6]; 6];
+    for (i, row) in rows.iter_mut().enumerate() {
+        row[i] = if i == 3 { 0.0 } else { 0.2 };
+    }
+    Constraint::from_rows(&rows, [2.0, 0.0, 0.0], 3.0).unwrap()
+}
+
+#[test]
+fn constraint_keeps_only_what_the_registration_pins_down() {
+    let c = hall_constraint();
+    // A correction of 10 cm along x (unconstrained) and 10 cm along y (constrained, gain 0.8).
+    let e = pose(0.1, 0.1, 0.0, 0.0);
+    let kept = c.filter(&e, 0.05);
+    assert!(kept.translation.x.abs() < 1e-9, "{kept:?}");
+    assert!((kept.translation.y - 0.08).abs() < 1e-9, "{kept:?}");
+    // Half gain 0: the correction is followed in full.
+    assert!(close(&c.filter(&e, 0.0), &e, 1e-12));
+    // A rotation about the constrained axes is kept at the same share, about the centre.
+    let turn =
+        Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.0), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01));
+    let kept = c.filter(&turn, 0.05);
+    assert!((kept.rotation.angle() - 0.008).abs() < 1e-6, "{kept:?}");
+    // Bad information is refused.
+    let mut rows = [[0.0; 6]; 6];
+    rows[0][0] = f64::NAN;
+    assert!(Constraint::from_rows(&rows, [0.0; 3], 1.0).is_none());
+    assert!(Constraint::from_rows(&[[0.0; 6]; 6], [0.0; 3], 0.0).is_none());
+}
+
+#[test]
+fn constrained_registration_slides_only_along_pinned_directions() {
+    let mut w = WorldPose::new(WorldPoseConfig::default());
+    for k in 0..=100u64 {
+        w.push_odometry(k * 10_000_000, rig_odometry(k * 10_000_000)).unwrap();
+    }
+    let w_t_o = pose(5.0, 2.0, 0.3, 30.0);
+    let t = 900_000_000;
+    w.push_registration(500_000_000, w_t_o * rig_odometry(500_000_000)).unwrap();
+    // The registration claims the rig is 20 cm further along its own x (the hall's axis) and
+    // 4 cm to its left.
+    let claimed = w_t_o * rig_odometry(t) * pose(0.2, 0.04, 0.0, 0.0);
+    let outcome = w.push_registration_constrained(t, claimed, &hall_constraint()).unwrap();
+    assert_eq!(outcome, RegistrationOutcome::Sliding);
+    let mut frames = 0;
+    while w.state() == WorldPoseState::Correcting {
+        w.step_frame();
+        frames += 1;
+        assert!(frames < 100);
+    }
+    let moved = (w_t_o * rig_odometry(t)).inverse() * w.world_pose(t).unwrap().unwrap();
+    assert!(moved.translation.x.abs() < 1e-6, "the hall's axis stays with the LIO: {moved:?}");
+    assert!((moved.translation.y - 0.04 * 0.8).abs() < 1e-6, "{moved:?}");
+}

@@ -11,7 +11,7 @@
 
 use super::buffer::PoseBuffer;
 use crate::PipelineError;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 /// Settings (TOML, `config/world_pose.toml`); every field has a default.
@@ -35,6 +35,13 @@ pub struct WorldPoseConfig {
     /// room, a corridor), not a correction.
     pub refuse_m: f64,
     pub refuse_deg: f64,
+    /// Per-direction fusion ([`WorldPose::push_registration_constrained`]): along each
+    /// eigen-direction of the registration's normalised information matrix (eigenvalue λ, unit-free,
+    /// 0 to 1/3), the correction takes the share λ / (λ + `half_gain_info`) of what the
+    /// registration says and keeps the LIO's pose for the rest. A hall's axis (λ ≈ 0.01) then moves
+    /// by a sixth of a registration's claim, a room's well-seen walls (λ ≈ 0.1-0.3) by two thirds
+    /// or more; repeated registrations converge where they agree. 0: follow every registration.
+    pub half_gain_info: f64,
 }
 
 impl Default for WorldPoseConfig {
@@ -47,6 +54,7 @@ impl Default for WorldPoseConfig {
             snap_deg: 10.0,
             refuse_m: 3.0,
             refuse_deg: 30.0,
+            half_gain_info: 0.05,
         }
     }
 }
@@ -56,13 +64,64 @@ impl WorldPoseConfig {
         let c: Self = toml::from_str(text)
             .map_err(|e| PipelineError::BadFile { format: "world pose config", reason: e.to_string() })?;
         let positive = [c.max_step_m, c.max_step_deg, c.snap_m, c.snap_deg, c.refuse_m, c.refuse_deg];
-        if c.buffer_len < 2 || positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        if c.buffer_len < 2
+            || positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
+            || !(c.half_gain_info.is_finite() && c.half_gain_info >= 0.0)
+        {
             return Err(PipelineError::BadFile {
                 format: "world pose config",
-                reason: "buffer_len must be at least 2 and the steps and snap limits positive".into(),
+                reason:
+                    "buffer_len must be at least 2, the steps and snap limits positive, half_gain_info not negative"
+                        .into(),
             });
         }
         Ok(c)
+    }
+}
+
+/// How well a registration pins down each direction of the rig's pose: the normalised
+/// point-to-plane information matrix in the rig's LiDAR frame (`AlignMetrics::information`),
+/// over (rotation about `centre_m` times `radius_m`, translation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Constraint {
+    pub information: Matrix6<f64>,
+    pub centre_m: Vector3<f64>,
+    pub radius_m: f64,
+}
+
+impl Constraint {
+    /// From the aligner's report (`AlignMetrics::information`, `information_centre_m`,
+    /// `information_radius_m`); `None` when it is not finite or the radius is not positive.
+    pub fn from_rows(rows: &[[f64; 6]; 6], centre_m: [f64; 3], radius_m: f64) -> Option<Self> {
+        let information = Matrix6::from_fn(|i, j| rows.get(i).and_then(|r| r.get(j)).copied().unwrap_or(f64::NAN));
+        let ok = information.iter().all(|v| v.is_finite())
+            && centre_m.iter().all(|v| v.is_finite())
+            && radius_m.is_finite()
+            && radius_m > 0.0;
+        ok.then(|| Self { information, centre_m: Vector3::from(centre_m), radius_m })
+    }
+
+    /// The part of `e` (a correction of the rig's pose, applied on the right: `pose · e`) that
+    /// this constraint supports: per eigen-direction the share λ / (λ + `half_gain`).
+    pub fn filter(&self, e: &Isometry3<f64>, half_gain: f64) -> Isometry3<f64> {
+        if half_gain <= 0.0 {
+            return *e;
+        }
+        let c = self.centre_m;
+        let rho = self.radius_m;
+        // e as a twist about c: p -> c + R (p - c) + t_c.
+        let w = e.rotation.scaled_axis();
+        let t_c = e.rotation * c + e.translation.vector - c;
+        let x = Vector6::new(w.x * rho, w.y * rho, w.z * rho, t_c.x, t_c.y, t_c.z);
+        let eig = SymmetricEigen::new(self.information);
+        let gains = eig.eigenvalues.map(|l| {
+            let l = l.max(0.0);
+            l / (l + half_gain)
+        });
+        let kept = eig.eigenvectors * Matrix6::from_diagonal(&gains) * eig.eigenvectors.transpose() * x;
+        let rot = UnitQuaternion::from_scaled_axis(Vector3::new(kept[0], kept[1], kept[2]) / rho);
+        let t = c + Vector3::new(kept[3], kept[4], kept[5]) - rot * c;
+        Isometry3::from_parts(Translation3::from(t), rot)
     }
 }
 
@@ -183,6 +242,31 @@ impl WorldPose {
         }
         self.registrations += 1;
         self.target = Some(w_t_o);
+        Ok(outcome)
+    }
+
+    /// Like [`Self::push_registration`], but a registration that would slide the correction moves
+    /// it only along the directions `constraint` pins down (see
+    /// [`WorldPoseConfig::half_gain_info`]); the rest stays with the LIO. The correction is taken
+    /// from the latest target (not the one still sliding), so repeated registrations that agree
+    /// converge on it. Initial, snapped and refused registrations behave as before.
+    pub fn push_registration_constrained(
+        &mut self,
+        t_ns: u64,
+        w_t_fpv: Isometry3<f64>,
+        constraint: &Constraint,
+    ) -> Result<RegistrationOutcome, PipelineError> {
+        let base = self.target.or(self.applied);
+        let Some(base) = base else { return self.push_registration(t_ns, w_t_fpv) };
+        let o_t_fpv = self.odom.at(t_ns)?;
+        let predicted = base * o_t_fpv;
+        // Classified on the full registration (snap and refuse judge what it claims); a sliding
+        // one only sets the target, which is then replaced by its supported part.
+        let outcome = self.push_registration(t_ns, w_t_fpv)?;
+        if outcome == RegistrationOutcome::Sliding {
+            let kept = constraint.filter(&(predicted.inverse() * w_t_fpv), self.config.half_gain_info);
+            self.target = Some(predicted * kept * o_t_fpv.inverse());
+        }
         Ok(outcome)
     }
 
