@@ -75,6 +75,13 @@ impl Default for ViewConfig {
 }
 
 impl ViewConfig {
+    /// Parses a `[view]` table (or a file holding only its keys) and checks it.
+    pub fn from_toml(text: &str) -> Result<Self, ViewError> {
+        let config: Self = toml::from_str(text).map_err(|e| ViewError::Config(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
     pub fn validate(&self) -> Result<(), ViewError> {
         if self.png_every == 0 {
             return Err(ViewError::Config("png_every must be at least 1".into()));
