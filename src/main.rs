@@ -1,6 +1,7 @@
 //! `starc`: the one command-line program of STARC.
 
 mod cmd;
+mod node;
 // The live views (issue 7): a library for `starc fpv` and `starc sim`, not wired into a command yet.
 #[allow(dead_code, unused_imports)]
 mod view;
@@ -40,7 +41,8 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Write the scans of a capture as point-cloud files.
     Export(cmd::export::Args),
-    /// Simulate a scenario: the sensors through the mock devices, a pcap and the ground truth.
+    /// Simulate a scenario and run the see-through mission on it live: mock devices, the robot
+    /// and rig nodes, the link on loopback; report.json, recordings, AR frames, plots.
     Sim(cmd::sim::Args),
     /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
     #[command(subcommand)]
@@ -55,6 +57,10 @@ enum Command {
     /// The see-through mission, offline, on a `starc sim` run: both LIOs, detection, alignment,
     /// projection, AR frames, and report.json scored against the truth.
     Mission(cmd::mission::Args),
+    /// The robot node: its Avia, LIO, person detection, the map and detections to the rig.
+    Robot(cmd::robot::Args),
+    /// The responder's rig node: its Avia, LIO, alignment to the robot's map, the AR view.
+    Fpv(cmd::fpv::Args),
 }
 
 fn main() -> ExitCode {
@@ -79,6 +85,8 @@ fn main() -> ExitCode {
         Command::Align(a) => cmd::align::run(a),
         Command::Lio(a) => cmd::lio::run(a),
         Command::Mission(a) => cmd::mission::run(a),
+        Command::Robot(a) => cmd::robot::run(a),
+        Command::Fpv(a) => cmd::fpv::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,4 +1,4 @@
-//! `starc sim lab --mission`: the see-through mission offline on a short simulated run, scored
+//! `starc sim lab --offline`: the see-through mission offline on a short simulated run, scored
 //! against the truth; report.json has its documented keys and the rig is placed in the robot's
 //! map within centimetres.
 
@@ -10,7 +10,7 @@ use std::process::Command;
 fn the_mission_aligns_the_rig_and_writes_its_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_starc"))
-        .args(["sim", "lab", "--duration", "12", "--mission", "--out"])
+        .args(["sim", "lab", "--duration", "12", "--offline", "--out"])
         .arg(dir.path())
         .output()
         .unwrap();

@@ -5,10 +5,11 @@ pub mod base;
 pub mod demo;
 pub mod devices;
 pub mod export;
+pub mod fpv;
 pub mod imu;
 pub mod inspect;
 pub mod lio;
-mod lio_input;
+pub mod lio_input;
 pub mod livox;
 pub mod mission;
 mod mission_score;
@@ -17,7 +18,9 @@ pub mod mock;
 pub mod ptp;
 pub mod rates;
 pub mod replay;
+pub mod robot;
 pub mod sim;
+mod sim_live;
 mod svg_plot;
 
 /// The tokio runtime every async subcommand runs on; two workers match the target machines.

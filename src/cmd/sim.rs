@@ -1,6 +1,8 @@
-//! `starc sim SCENARIO --out DIR`: runs a scenario's simulated sensors through the mock devices
-//! and writes the Avia pcap and the ground truth; with `--mission`, runs the see-through mission
-//! on it (see `mission.rs`).
+//! `starc sim SCENARIO --out DIR`: runs a scenario's simulated sensors through the mock devices,
+//! writes the Avia pcap and the ground truth, then runs the see-through mission on it live: mock
+//! Avias play the run back over their real protocol to the robot and rig nodes, linked over
+//! zenoh on loopback (`sim_live.rs`), into DIR/mission. `--offline` runs the mission in one
+//! process instead (`mission.rs`); `--sensors-only` (or `--no-camera`) stops after the sensors.
 
 use anyhow::Context;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
@@ -30,10 +32,15 @@ pub struct Args {
     /// List the shipped scenarios and exit.
     #[arg(long)]
     list: bool,
-    /// Then run the see-through mission on the run (`starc mission DIR`): both LIOs, detection,
-    /// alignment, AR frames and DIR/mission/report.json.
+    /// Only simulate the sensors (no mission).
     #[arg(long)]
-    mission: bool,
+    sensors_only: bool,
+    /// Run the mission offline, in one process without nodes or link (`starc mission DIR`).
+    #[arg(long)]
+    offline: bool,
+    /// Write every Nth camera frame's AR view as PNG (0: none).
+    #[arg(long, default_value_t = 5)]
+    frames_every: u64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -44,8 +51,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    if args.mission && args.no_camera {
-        anyhow::bail!("--mission scores the camera frames: leave out --no-camera");
+    if args.offline && (args.no_camera || args.sensors_only) {
+        anyhow::bail!(
+            "--offline runs the mission, which scores the camera frames: leave out --no-camera and --sensors-only"
+        );
     }
     let (scenario, text) = Scenario::load(&args.scenario)?;
     let opts = SimOptions {
@@ -101,15 +110,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     println!("  wrote {}", args.out.display());
-    if args.mission {
+    if args.offline {
         super::mission::run(super::mission::Args {
             dir: args.out.clone(),
             out: None,
-            frames_every: 5,
+            frames_every: args.frames_every,
             start_hint_m: 1.0,
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
         })?;
+    } else if !args.sensors_only && !args.no_camera {
+        let opts = super::sim_live::LiveOptions {
+            out: args.out.join("mission"),
+            frames_every: args.frames_every,
+            start_hint_m: 1.0,
+            start_hint_deg: 20.0,
+            start_gate_m: 2.0,
+        };
+        super::sim_live::run(&args.out, &opts)?;
     }
     Ok(())
 }

@@ -7,6 +7,9 @@ Usage:
       the stored definitions itself), and rosbags' built-in ROS 2 Humble typestore (independent
       definitions: checks our byte layout). Field values must match EXPECTED (written by the
       Rust test). Prints one JSON line with the counts.
+  mcap_check.py topics RECORDING
+      Decodes every message with `mcap` + `mcap-ros2-support` and opens the file with rosbags'
+      AnyReader; prints one JSON line: messages per topic (mcap) and per topic (rosbags).
   mcap_check.py recover RECORDING
       Reads a file that lost its end (no summary, no footer) with `mcap`'s non-seeking reader,
       as far as it goes; prints one JSON line with the count and the error that stopped it.
@@ -205,8 +208,29 @@ def recover(path):
     print(json.dumps({"messages": n, "topics": topics, "stopped_by": stopped_by}))
 
 
+
+def topics(path):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    counts = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _schema, channel, _message, decoded in reader.iter_decoded_messages():
+            assert decoded is not None
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    rosbags_counts = {}
+    with AnyReader([Path(path)]) as r:
+        for conn, _t, raw in r.messages():
+            r.deserialize(raw, conn.msgtype)
+            rosbags_counts[conn.topic] = rosbags_counts.get(conn.topic, 0) + 1
+    print(json.dumps({"mcap": counts, "rosbags": rosbags_counts}))
+
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "full":
+    if len(sys.argv) == 3 and sys.argv[1] == "topics":
+        topics(sys.argv[2])
+    elif len(sys.argv) == 4 and sys.argv[1] == "full":
         full(sys.argv[2], sys.argv[3])
     elif len(sys.argv) == 3 and sys.argv[1] == "recover":
         recover(sys.argv[2])

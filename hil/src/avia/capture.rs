@@ -82,6 +82,9 @@ pub struct CaptureSource {
     exhausted: bool,
     last_imu: ImuSample,
     points: Vec<Point>,
+    /// Replay at the recorded times: a packet stamped `s` leaves at device time `s - epoch`,
+    /// once, with no looping (see [`CaptureSource::at_recorded_time`]).
+    recorded_epoch_ns: Option<u64>,
 }
 
 impl std::fmt::Debug for CaptureSource {
@@ -151,12 +154,30 @@ impl CaptureSource {
             passes: 0,
             exhausted: false,
             last_imu: AT_REST,
+            recorded_epoch_ns: None,
             points: Vec::new(),
         };
         if !s.read_more() {
             return Err(HilError::EmptyCapture { path: Self::path(&s.origin), reason: "no Livox data packets" });
         }
         Ok(s)
+    }
+
+    /// Replays only the device at `ip` (by default, the first device seen).
+    pub fn for_device(mut self, ip: Ipv4Addr) -> Self {
+        self.device = Some(DeviceKey::Ip(ip));
+        self
+    }
+
+    /// Replays at the recorded times instead of from the start of streaming: a packet stamped
+    /// `s` goes out when the device's clock reads `s - epoch_ns`, so with the device's PTP epoch
+    /// set to `epoch_ns` its packets carry their recorded stamps, and several devices replayed
+    /// this way keep their recorded relative timing (a recorded run played back live, its truth
+    /// still valid). What lies before the device started streaming is skipped; the capture is
+    /// played once.
+    pub fn at_recorded_time(mut self, epoch_ns: u64) -> Self {
+        self.recorded_epoch_ns = Some(epoch_ns);
+        self
     }
 
     /// Times the capture has been started over.
@@ -182,7 +203,7 @@ impl CaptureSource {
                 Some(Err(e)) => tracing::warn!("capture {}: {e}; starting over", Self::path(&self.origin).display()),
                 None => {}
             }
-            if self.packets_this_pass == 0 {
+            if self.packets_this_pass == 0 || self.recorded_epoch_ns.is_some() {
                 self.exhausted = true;
                 return false;
             }
@@ -222,6 +243,7 @@ impl CaptureSource {
         }
         let stamp = packet.header.timestamp.ns;
         let at = match self.prev {
+            _ if self.recorded_epoch_ns.is_some() => i64::try_from(stamp).unwrap_or(i64::MAX),
             Some((prev_stamp, prev_at)) => {
                 let step = (i128::from(stamp) - i128::from(prev_stamp))
                     .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
@@ -301,6 +323,9 @@ impl CaptureSource {
 
     /// Device time of a replay time, anchoring the two at the first use after `start`.
     fn device_ns(&mut self, at: i64) -> u64 {
+        if let Some(epoch) = self.recorded_epoch_ns {
+            return u64::try_from(at).unwrap_or(0).saturating_sub(epoch);
+        }
         let (r0, d0) = *self.anchor.get_or_insert((at, self.start_ns));
         d0.saturating_add_signed(at.saturating_sub(r0))
     }

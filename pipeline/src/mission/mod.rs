@@ -41,9 +41,11 @@ pub fn render_view(
     link: &str,
     cfg: &RenderConfig,
 ) -> View {
-    let rig_pose = rig.world().world_pose(t_ns).ok().flatten();
+    // Past the rig's newest pose (a detection newer than the rig's last scan) the pose holds.
+    let pose_ns = rig.last().map_or(t_ns, |(last_ns, _)| t_ns.min(last_ns));
+    let rig_pose = rig.world().world_pose(pose_ns).ok().flatten();
     let aligned = rig_pose.is_some();
-    let odom_pose = rig.world().odometry().at(t_ns).ok();
+    let odom_pose = rig.world().odometry().at(pose_ns).ok();
     let world_t_camera = rig_pose.or(odom_pose).unwrap_or_else(Isometry3::identity) * lidar_t_camera;
     // The rig's own points live in its odometry frame: into the world with the correction.
     let correction = rig.world().correction().unwrap_or_else(Isometry3::identity);

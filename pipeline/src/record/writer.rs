@@ -248,16 +248,32 @@ impl Recorder {
     /// One LiDAR scan on `/robot/points` in the LiDAR frame: fields x, y, z, intensity (f32),
     /// t (u32, ns after the header stamp), line and tag (u8). The stamp is the scan's start.
     pub fn point_cloud(&mut self, cloud: &PointCloud) -> Result<(), PipelineError> {
+        self.point_cloud_on(Topic::Points.name(), cloud)
+    }
+
+    /// As [`point_cloud`](Self::point_cloud) on another topic (a second device: `/fpv/points`).
+    pub fn point_cloud_on(&mut self, topic: &str, cloud: &PointCloud) -> Result<(), PipelineError> {
         let start = cloud
             .start
             .ok_or_else(|| PipelineError::Recording { reason: "a point cloud without a start time".into() })?;
         let msg = cloud_to_msg(cloud, self.header(start, &self.options.frames.lidar.clone())?);
         check_cloud(&msg)?;
-        self.write(Topic::Points.name(), start.ns, &msg)
+        self.write(topic, start.ns, &msg)
     }
 
     /// One IMU sample on `/robot/imu` (orientation unknown: `orientation_covariance[0] = -1`, per REP 145).
     pub fn imu(&mut self, stamp: Stamp, gyro_rad_s: [f64; 3], acc_m_s2: [f64; 3]) -> Result<(), PipelineError> {
+        self.imu_on(Topic::Imu.name(), stamp, gyro_rad_s, acc_m_s2)
+    }
+
+    /// As [`imu`](Self::imu) on another topic (a second device: `/fpv/imu`).
+    pub fn imu_on(
+        &mut self,
+        topic: &str,
+        stamp: Stamp,
+        gyro_rad_s: [f64; 3],
+        acc_m_s2: [f64; 3],
+    ) -> Result<(), PipelineError> {
         let mut not_given = [0.0; 9];
         not_given[0] = -1.0;
         let msg = Imu {
@@ -269,7 +285,7 @@ impl Recorder {
             linear_acceleration: Vector3::new(acc_m_s2[0], acc_m_s2[1], acc_m_s2[2]),
             linear_acceleration_covariance: [0.0; 9],
         };
-        self.write(Topic::Imu.name(), stamp.ns, &msg)
+        self.write(topic, stamp.ns, &msg)
     }
 
     /// The robot's odometry on `/robot/odom`: base frame in the odom frame, twist in the base

@@ -1,0 +1,25 @@
+//! `starc robot --config robot.toml`: the robot node (see `node::robot`); stops on SIGINT or
+//! SIGTERM, finishing its recording.
+
+use super::runtime;
+use crate::node::config::{load, RobotNodeConfig};
+use crate::node::{robot, stop_on_signals};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The node's config (see config/robot.toml).
+    #[arg(long)]
+    pub config: PathBuf,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut cfg: RobotNodeConfig = load(&args.config)?;
+    cfg.resolve_paths(&args.config);
+    runtime()?.block_on(async move {
+        let (_stop_tx, stop) = stop_on_signals()?;
+        let summary = robot::run(cfg, stop, None).await?;
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+        Ok(())
+    })
+}

@@ -1,0 +1,290 @@
+//! The simulated mission, live: a `starc sim` run's two Avias played back by mock devices over
+//! their real protocol (discovery, handshake, heartbeats, point and IMU packets) at their
+//! recorded times, the robot node and the rig node each on its own runtime with its own live
+//! driver, the link between them over zenoh on tcp/127.0.0.1, and everything the nodes do scored
+//! against the simulator's truth into report.json (mode "live").
+
+use super::lio::peak_rss_mib;
+use super::mission::{FPV_AVIA, ROBOT_AVIA};
+use super::mission_score::{summary, LatencyReport, MemoryReport, Scorer, Truth};
+use crate::node::config::{CameraMountConfig, FpvNodeConfig, RobotNodeConfig, StartPose};
+use crate::node::fpv::{self, FpvEvent};
+use crate::node::robot::{self, RobotEvent};
+use anyhow::{bail, Context};
+use nalgebra::{Isometry3, UnitQuaternion};
+use starc_hil::avia::{CaptureSource, MockAvia, MockAviaConfig};
+use starc_hil::sim::truth::tum_line;
+use starc_link::LinkConfig;
+use starc_livox::capture;
+use starc_livox::data::DataPacket;
+use starc_livox::live::DriverConfig;
+use starc_pipeline::mission::AlignVerdict;
+use std::io::Write as _;
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc as std_mpsc;
+use std::time::{Duration, Instant};
+use tokio::sync::{mpsc, watch};
+
+/// The mocks' addresses on loopback (the nodes find them by their broadcasts).
+const ROBOT_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 1);
+const FPV_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 2);
+/// Time for the nodes to find and set up their devices before the recording starts playing.
+const LEAD_NS: u64 = 2_500_000_000;
+/// Time after the recording's end for the nodes to finish their last scans.
+const TAIL: Duration = Duration::from_millis(1500);
+
+pub struct LiveOptions {
+    pub out: PathBuf,
+    pub frames_every: u64,
+    pub start_hint_m: f64,
+    pub start_hint_deg: f64,
+    pub start_gate_m: f64,
+}
+
+fn free_port() -> anyhow::Result<u16> {
+    let s = std::net::TcpListener::bind("127.0.0.1:0")?;
+    let u = std::net::UdpSocket::bind(("127.0.0.1", s.local_addr()?.port()));
+    match u {
+        Ok(u) => Ok(u.local_addr()?.port()),
+        Err(_) => free_port_udp(),
+    }
+}
+
+fn free_port_udp() -> anyhow::Result<u16> {
+    Ok(std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// The first packet stamp of the capture (where playback starts).
+fn first_stamp_ns(pcap: &Path) -> anyhow::Result<u64> {
+    for d in capture::open(pcap).with_context(|| format!("opening {}", pcap.display()))? {
+        let d = d?;
+        if let Ok(p) = DataPacket::parse(&d.payload) {
+            return Ok(p.header.timestamp.ns);
+        }
+    }
+    bail!("{}: no Livox data packet", pcap.display())
+}
+
+fn driver(broadcast_port: u16) -> anyhow::Result<DriverConfig> {
+    let data_port = free_port_udp()?;
+    Ok(DriverConfig {
+        host_ip: Ipv4Addr::LOCALHOST,
+        broadcast_listen: Some(SocketAddrV4::new(Ipv4Addr::LOCALHOST, broadcast_port)),
+        cmd_port: free_port_udp()?,
+        data_port,
+        imu_port: data_port,
+        accept_unsolicited_data: false,
+        ..DriverConfig::default()
+    })
+}
+
+fn link(listen: Option<u16>, connect: Option<u16>) -> anyhow::Result<LinkConfig> {
+    let mut text = String::new();
+    if let Some(p) = listen {
+        text.push_str(&format!("listen = [\"tcp/127.0.0.1:{p}\"]\n"));
+    }
+    if let Some(p) = connect {
+        text.push_str(&format!("connect = [\"tcp/127.0.0.1:{p}\"]\n"));
+    }
+    Ok(LinkConfig::from_toml(&text)?)
+}
+
+/// Runs the nodes on their own thread and runtime.
+fn spawn_node<F, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<T>>>
+where
+    F: FnOnce() -> std::pin::Pin<Box<dyn std::future::Future<Output = anyhow::Result<T>>>> + Send + 'static,
+    T: Send + 'static,
+{
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    Ok(std::thread::Builder::new().name(name.into()).spawn(move || rt.block_on(f()))?)
+}
+
+pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
+    let started = Instant::now();
+    std::fs::create_dir_all(opts.out.join("ar")).with_context(|| format!("creating {}", opts.out.display()))?;
+    let mut score = Scorer::new(Truth::load(dir)?);
+    let pcap = dir.join("avia.pcap");
+    let s0 = first_stamp_ns(&pcap)?;
+    let end_ns =
+        [&score.truth.gt_robot, &score.truth.gt_fpv].iter().filter_map(|t| t.last().map(|l| l.0)).max().unwrap_or(s0);
+    let camera = score.truth.mount.camera.clone();
+    let lidar_t_camera = score.truth.mount.lidar_t_camera;
+
+    // The robot's LIO world is gravity-aligned at its start with yaw zero: the expected start
+    // of the responder in it, for the rig's config, from the truth (then moved by the hint).
+    let gt0 = score.truth.gt_robot.first().map(|g| g.1).unwrap_or_else(Isometry3::identity);
+    let (roll, pitch, _) = gt0.rotation.euler_angles();
+    let lio_t_world_guess =
+        Isometry3::from_parts(Default::default(), UnitQuaternion::from_euler_angles(roll, pitch, 0.0)) * gt0.inverse();
+    let fpv_t0 = score.truth.gt_fpv.first().map_or(s0, |g| g.0);
+    let hint = score.truth.start_hint(&lio_t_world_guess, fpv_t0, opts.start_hint_m, opts.start_hint_deg);
+    let (_, _, hint_yaw) = hint.rotation.euler_angles();
+    let t = hint.translation.vector;
+
+    let (robot_bcast, fpv_bcast, link_port) = (free_port_udp()?, free_port_udp()?, free_port()?);
+    let robot_cfg = RobotNodeConfig {
+        livox: driver(robot_bcast)?,
+        lidar_ip: Some(ROBOT_MOCK),
+        lio: None,
+        map_period_ms: 1000,
+        record: Some(opts.out.join("robot.mcap")),
+        link: link(Some(link_port), None)?,
+    };
+    let q = lidar_t_camera.rotation.quaternion();
+    let c = lidar_t_camera.translation.vector;
+    let fpv_cfg = FpvNodeConfig {
+        livox: driver(fpv_bcast)?,
+        lidar_ip: Some(FPV_MOCK),
+        lio: None,
+        render: None,
+        camera: CameraMountConfig {
+            model: camera,
+            translation_m: [c.x, c.y, c.z],
+            quaternion_xyzw: [q.i, q.j, q.k, q.w],
+        },
+        expected_start: Some(StartPose { position_m: [t.x, t.y, t.z], yaw_deg: hint_yaw.to_degrees() }),
+        start_gate_m: opts.start_gate_m,
+        shared_lidar_clock: true,
+        view: crate::view::ViewConfig::default(),
+        record: Some(opts.out.join("fpv.mcap")),
+        record_frames_every: 5,
+        link: link(None, Some(link_port))?,
+    };
+    let schedule: Vec<(u64, u64)> = score.truth.frames.iter().map(|f| (f.index, f.t_ns)).collect();
+
+    // The mocks, on their own runtime: playback starts LEAD after now, at the first stamp.
+    let mocks_rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    let w0 = Instant::now() + Duration::from_nanos(LEAD_NS);
+    let mut mocks = Vec::new();
+    for (sim_ip, mock_ip, bcast) in [(ROBOT_AVIA, ROBOT_MOCK, robot_bcast), (FPV_AVIA, FPV_MOCK, fpv_bcast)] {
+        let lead_left = w0.saturating_duration_since(Instant::now()).as_nanos() as u64;
+        let epoch = s0.saturating_sub(lead_left);
+        let source = CaptureSource::open(&pcap)?.for_device(sim_ip).at_recorded_time(epoch);
+        let cfg = MockAviaConfig {
+            broadcast_to: SocketAddrV4::new(Ipv4Addr::LOCALHOST, bcast),
+            epoch_ns: Some(epoch),
+            ..MockAviaConfig::on(mock_ip)
+        };
+        mocks.push(mocks_rt.block_on(MockAvia::spawn_with_source(cfg, Box::new(source)))?);
+    }
+
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let (robot_tx, mut robot_rx) = mpsc::unbounded_channel();
+    let (fpv_tx, mut fpv_rx) = mpsc::unbounded_channel();
+    let robot_stop = stop_rx.clone();
+    let robot = spawn_node("robot-node", move || Box::pin(robot::run(robot_cfg, robot_stop, Some(robot_tx))))?;
+    let fpv_stop = stop_rx.clone();
+    let fpv = spawn_node("fpv-node", move || Box::pin(fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx))))?;
+
+    let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
+    let total_s = deadline.saturating_duration_since(Instant::now()).as_secs_f64();
+    let (mut robot_tum, mut rig_tum) = (Vec::new(), Vec::new());
+    let (mut slam, mut comm, mut viz, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut detections, mut frames) = (0u64, 0u64);
+    let png_dir = opts.out.join("ar");
+    let (err_tx, err_rx) = std_mpsc::channel::<anyhow::Error>();
+    let mut last_progress = Instant::now();
+    loop {
+        let now = Instant::now();
+        let finished = now >= deadline || robot.is_finished() || fpv.is_finished();
+        while let Ok(ev) = robot_rx.try_recv() {
+            match ev {
+                RobotEvent::Pose { end_ns, lidar_pose, .. } => {
+                    score.robot_pose(end_ns, &lidar_pose);
+                    robot_tum.push(tum_line(end_ns, &lidar_pose));
+                }
+                RobotEvent::Detection { detection } => {
+                    detections += 1;
+                    score.detection(&detection);
+                }
+            }
+        }
+        while let Ok(ev) = fpv_rx.try_recv() {
+            match ev {
+                FpvEvent::Started { first_ns } => score.rig_started(first_ns),
+                FpvEvent::Alignment { end_ns, world_t_lidar, total_ms, verdict } => {
+                    score.alignment(end_ns, &world_t_lidar, total_ms, matches!(verdict, AlignVerdict::Accepted { .. }));
+                }
+                FpvEvent::Frame { index, t_ns, view, render_ms } => {
+                    frames += 1;
+                    rig_tum.push(tum_line(t_ns, &(view.world_t_camera * lidar_t_camera.inverse())));
+                    if let Some(f) = score.truth.frames.iter().find(|f| f.index == index).cloned() {
+                        let keep = (opts.frames_every > 0 && index.is_multiple_of(opts.frames_every))
+                            .then_some(png_dir.as_path());
+                        if let Err(e) = score.frame(&f, &view, render_ms, keep) {
+                            let _ = err_tx.send(e);
+                        }
+                    }
+                    let _ = t_ns;
+                }
+                FpvEvent::Shown { slam_ns, comm_ns, viz_ns, .. } => {
+                    let ms = |ns: i64| ns as f64 * 1e-6;
+                    slam.push(ms(slam_ns));
+                    comm.push(ms(comm_ns));
+                    viz.push(ms(viz_ns));
+                    total.push(ms(slam_ns + comm_ns + viz_ns));
+                }
+            }
+        }
+        if finished {
+            break;
+        }
+        if now.duration_since(last_progress) >= Duration::from_secs(5) {
+            last_progress = now;
+            let left = deadline.saturating_duration_since(now).as_secs_f64();
+            eprintln!(
+                "live mission: {:.0} / {total_s:.0} s, {detections} detection windows, {frames} frames scored",
+                total_s - left
+            );
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let _ = stop_tx.send(true);
+    let robot_summary = robot.join().map_err(|_| anyhow::anyhow!("the robot node panicked"))?;
+    let fpv_summary = fpv.join().map_err(|_| anyhow::anyhow!("the rig node panicked"))?;
+    for m in mocks.drain(..) {
+        let _ = mocks_rt.block_on(m.stop());
+    }
+    let robot_summary = robot_summary.context("robot node")?;
+    let fpv_summary = fpv_summary.context("rig node")?;
+    if let Ok(e) = err_rx.try_recv() {
+        return Err(e);
+    }
+    if robot_tum.is_empty() || fpv_summary.scans == 0 {
+        bail!(
+            "the live mission got no {}: did the nodes connect to the mocks?",
+            if robot_tum.is_empty() { "robot poses" } else { "rig scans" }
+        );
+    }
+    let latency = LatencyReport::from_parts(&slam, &comm, &viz, &total);
+    let memory = MemoryReport {
+        peak_rss_mib: peak_rss_mib(),
+        note: Some("one process: both nodes, both mocks and the scorer".into()),
+    };
+    let report = score.finish("live", latency, &total, memory, started.elapsed().as_secs_f64(), &opts.out)?;
+    std::fs::write(opts.out.join("robot.tum"), robot_tum.join("\n") + "\n")?;
+    std::fs::write(opts.out.join("rig_world.tum"), rig_tum.join("\n") + "\n")?;
+    std::fs::write(
+        opts.out.join("nodes.json"),
+        serde_json::to_string_pretty(&serde_json::json!({ "robot": robot_summary, "fpv": fpv_summary }))? + "\n",
+    )?;
+    let mut stdout = std::io::stdout().lock();
+    write!(stdout, "{}", summary(&report))?;
+    writeln!(
+        stdout,
+        "  nodes: robot {} scans, {} detection windows and {} map tiles sent; rig {} scans, {} frames, {} detections received",
+        robot_summary.scans,
+        robot_summary.detections_sent,
+        robot_summary.tiles_sent,
+        fpv_summary.scans,
+        fpv_summary.frames,
+        fpv_summary.detections_received
+    )?;
+    writeln!(
+        stdout,
+        "  wrote {} (report.json, frames.csv, ar/, plots/, robot.mcap, fpv.mcap, robot.tum, rig_world.tum, nodes.json)",
+        opts.out.display()
+    )?;
+    Ok(())
+}

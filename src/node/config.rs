@@ -1,0 +1,231 @@
+//! `robot.toml` and `fpv.toml`: what each node runs (examples in config/, every key documented
+//! there).
+
+use anyhow::Context;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde::Deserialize;
+use starc_link::LinkConfig;
+use starc_livox::live::DriverConfig;
+use starc_pipeline::ar::{CameraModel, RenderConfig};
+use starc_pipeline::lio::{LioConfig, LioFile};
+use std::net::Ipv4Addr;
+use std::path::{Path, PathBuf};
+
+/// The robot node: its Avia, the LIO, detection, the map it shares, the link, a recording.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotNodeConfig {
+    /// The Livox driver (host address and ports, discovery, devices to connect to).
+    #[serde(default)]
+    pub livox: DriverConfig,
+    /// The robot's Avia; none: the first device whose data arrives.
+    #[serde(default)]
+    pub lidar_ip: Option<Ipv4Addr>,
+    /// A LIO config file (config/lio.toml); none: the defaults (internal IMU).
+    #[serde(default)]
+    pub lio: Option<PathBuf>,
+    /// Changed map tiles go to the rig this often.
+    #[serde(default = "default_map_period_ms")]
+    pub map_period_ms: u64,
+    /// Record the robot's points, IMU, poses and detections (MCAP, ROS 2 types) here.
+    #[serde(default)]
+    pub record: Option<PathBuf>,
+    pub link: LinkConfig,
+}
+
+fn default_map_period_ms() -> u64 {
+    1000
+}
+
+/// Where the responder is expected to start, in the robot's map frame.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StartPose {
+    pub position_m: [f64; 3],
+    #[serde(default)]
+    pub yaw_deg: f64,
+}
+
+impl StartPose {
+    pub fn isometry(&self) -> Isometry3<f64> {
+        let [x, y, z] = self.position_m;
+        Isometry3::from_parts(
+            Translation3::new(x, y, z),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw_deg.to_radians()),
+        )
+    }
+}
+
+/// The camera on the rig: intrinsics and its pose on the rig's LiDAR.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraMountConfig {
+    #[serde(flatten)]
+    pub model: CameraModel,
+    /// Camera (optical frame: x right, y down, z forward) in the LiDAR frame.
+    pub translation_m: [f64; 3],
+    /// The same rotation as a quaternion (x, y, z, w).
+    pub quaternion_xyzw: [f64; 4],
+}
+
+impl CameraMountConfig {
+    pub fn lidar_t_camera(&self) -> anyhow::Result<Isometry3<f64>> {
+        let [x, y, z, w] = self.quaternion_xyzw;
+        let q = nalgebra::Quaternion::new(w, x, y, z);
+        let n = q.norm();
+        if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
+            anyhow::bail!("camera.quaternion_xyzw must be a unit quaternion (norm {n})");
+        }
+        let [tx, ty, tz] = self.translation_m;
+        Ok(Isometry3::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(q)))
+    }
+}
+
+/// The rig node: its Avia, its LIO, alignment to the robot's map, the AR view and its outputs.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FpvNodeConfig {
+    #[serde(default)]
+    pub livox: DriverConfig,
+    #[serde(default)]
+    pub lidar_ip: Option<Ipv4Addr>,
+    #[serde(default)]
+    pub lio: Option<PathBuf>,
+    /// An AR render config file (config/ar.toml); none: the defaults.
+    #[serde(default)]
+    pub render: Option<PathBuf>,
+    pub camera: CameraMountConfig,
+    /// Seeds and gates the first alignment; none: the robot's map origin (the responder starts
+    /// where the robot started).
+    #[serde(default)]
+    pub expected_start: Option<StartPose>,
+    /// A first alignment farther than this from the expected start is refused.
+    #[serde(default = "default_start_gate_m")]
+    pub start_gate_m: f64,
+    /// Both LiDARs on one PTP clock (the robot's grandmaster): detections are placed in time by
+    /// their LiDAR stamps. False: through the hosts' clocks and the link's offset estimate.
+    #[serde(default = "yes")]
+    pub shared_lidar_clock: bool,
+    #[serde(default)]
+    pub view: crate::view::ViewConfig,
+    /// Record the rig's points, IMU, world pose and AR frames here.
+    #[serde(default)]
+    pub record: Option<PathBuf>,
+    /// With `record`: keep every Nth AR frame in the recording.
+    #[serde(default = "default_record_frames_every")]
+    pub record_frames_every: u64,
+    pub link: LinkConfig,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn default_start_gate_m() -> f64 {
+    2.0
+}
+
+fn default_record_frames_every() -> u64 {
+    5
+}
+
+fn read(path: &Path) -> anyhow::Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))
+}
+
+/// A node config file; relative paths inside it are taken from the file's directory.
+pub fn load<T: for<'de> Deserialize<'de>>(path: &Path) -> anyhow::Result<T> {
+    let text = read(path)?;
+    toml::from_str(&text).with_context(|| format!("{}", path.display()))
+}
+
+pub fn lio_config(path: Option<&Path>) -> anyhow::Result<LioConfig> {
+    let Some(path) = path else { return Ok(LioConfig::default()) };
+    let file = LioFile::from_toml(&read(path)?).with_context(|| format!("{}", path.display()))?;
+    Ok(file.to_config()?)
+}
+
+pub fn render_config(path: Option<&Path>) -> anyhow::Result<RenderConfig> {
+    let Some(path) = path else { return Ok(RenderConfig::default()) };
+    RenderConfig::from_toml(&read(path)?).with_context(|| format!("{}", path.display()))
+}
+
+/// A path in a config file, taken from the file's directory when relative.
+fn rel(config: &Path, p: &mut Option<PathBuf>) {
+    if let (Some(path), Some(dir)) = (p.as_mut(), config.parent()) {
+        if path.is_relative() {
+            *path = dir.join(&*path);
+        }
+    }
+}
+
+impl RobotNodeConfig {
+    /// Relative paths in the file are relative to the file.
+    pub fn resolve_paths(&mut self, config: &Path) {
+        rel(config, &mut self.lio);
+        rel(config, &mut self.record);
+        rel(config, &mut self.link.zenoh_config);
+    }
+}
+
+impl FpvNodeConfig {
+    /// Relative paths in the file are relative to the file.
+    pub fn resolve_paths(&mut self, config: &Path) {
+        rel(config, &mut self.lio);
+        rel(config, &mut self.render);
+        rel(config, &mut self.record);
+        rel(config, &mut self.view.png_dir);
+        rel(config, &mut self.link.zenoh_config);
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join(name)
+    }
+
+    #[test]
+    fn shipped_robot_config_loads() {
+        let path = shipped("robot.toml");
+        let mut cfg: RobotNodeConfig = load(&path).unwrap();
+        cfg.resolve_paths(&path);
+        assert_eq!(cfg.lidar_ip, Some(Ipv4Addr::new(192, 168, 1, 101)));
+        assert!(!cfg.link.multicast_scouting);
+        // The LIO file it names exists and parses.
+        lio_config(cfg.lio.as_deref()).unwrap();
+    }
+
+    #[test]
+    fn shipped_fpv_config_loads_and_its_camera_looks_forward() {
+        let path = shipped("fpv.toml");
+        let mut cfg: FpvNodeConfig = load(&path).unwrap();
+        cfg.resolve_paths(&path);
+        render_config(cfg.render.as_deref()).unwrap();
+        let t = cfg.camera.lidar_t_camera().unwrap();
+        // The camera's optical axis (z) is the LiDAR's forward (x), its image down (y) is down.
+        let forward = t.rotation * nalgebra::Vector3::z();
+        let down = t.rotation * nalgebra::Vector3::y();
+        assert!((forward - nalgebra::Vector3::x()).norm() < 1e-9, "{forward}");
+        assert!((down + nalgebra::Vector3::z()).norm() < 1e-9, "{down}");
+        assert!(cfg.shared_lidar_clock);
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_quaternions_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let bad = dir.path().join("robot.toml");
+        std::fs::write(&bad, "lidar_ipp = \"1.2.3.4\"\n[link]\n").unwrap();
+        let e = load::<RobotNodeConfig>(&bad).unwrap_err();
+        assert!(format!("{e:#}").contains("lidar_ipp"), "{e:#}");
+        let cam = CameraMountConfig {
+            model: CameraModel::default(),
+            translation_m: [0.0; 3],
+            quaternion_xyzw: [0.0, 0.0, 0.0, 2.0],
+        };
+        assert!(cam.lidar_t_camera().is_err());
+    }
+}
