@@ -235,16 +235,16 @@ impl Inbox {
     }
 }
 
-/// QoS per kind: heartbeats and clock probes jump every queue (their timing is the point);
-/// people and poses go next and are dropped rather than queued when the link chokes (a newer one
-/// follows); map tiles wait their turn but are never dropped.
+/// QoS per kind: heartbeats and clock probes jump every queue and go out alone (express: their
+/// timing is the point); people and poses go next, batched, and are dropped rather than queued
+/// when the link chokes (a newer one follows); map tiles wait their turn but are never dropped.
 fn qos(msg: &LinkMessage) -> (CongestionControl, Priority, bool) {
     match msg {
         LinkMessage::Heartbeat { .. } | LinkMessage::ClockProbe { .. } | LinkMessage::ClockReply { .. } => {
             (CongestionControl::Drop, Priority::RealTime, true)
         }
         LinkMessage::RobotPose { .. } | LinkMessage::Detections { .. } => {
-            (CongestionControl::Drop, Priority::InteractiveHigh, true)
+            (CongestionControl::Drop, Priority::InteractiveHigh, false)
         }
         LinkMessage::MapTile { .. } => (CongestionControl::Block, Priority::DataLow, false),
     }

@@ -174,3 +174,16 @@ async fn wifi_loss_goes_stale_then_lost_and_resumes_with_the_map() {
     rig.close().await.unwrap();
     robot.close().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dropping_a_node_without_close_ends_its_session() {
+    let port = free_port();
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await);
+    drop(robot);
+    // Its heartbeat task is gone and its listener closed: the rig loses it, and the port is free.
+    assert!(wait_for(Duration::from_secs(5), || rig.health().state == LinkState::Lost).await, "{:?}", rig.health());
+    assert!(wait_for(Duration::from_secs(5), || std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()).await);
+    rig.close().await.unwrap();
+}
