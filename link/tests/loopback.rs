@@ -187,3 +187,47 @@ async fn dropping_a_node_without_close_ends_its_session() {
     assert!(wait_for(Duration::from_secs(5), || std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()).await);
     rig.close().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rig_started_first_waits_for_the_robot() {
+    let port = free_port();
+    let started = std::time::Instant::now();
+    let rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    // Opening does not wait for the robot: the connector retries in the background.
+    assert!(started.elapsed() < Duration::from_secs(2), "open took {:?}", started.elapsed());
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(rig.health().state, LinkState::Lost);
+    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
+    assert_eq!(rig.health().resumptions, 0);
+    robot.close().await.unwrap();
+    rig.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn damaged_messages_on_the_wire_are_counted_not_delivered() {
+    let port = free_port();
+    let rig_cfg = common::fast(vec![format!("tcp/127.0.0.1:{port}")], vec![]);
+    let mut rig = LinkNode::open(&rig_cfg, Role::Rig).await.unwrap();
+    // A plain zenoh peer (no link node) puts garbage and a damaged frame on the robot's keys.
+    let mut z = zenoh::Config::default();
+    z.insert_json5("listen/endpoints", "[]").unwrap();
+    z.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]")).unwrap();
+    z.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    z.insert_json5("scouting/gossip/enabled", "false").unwrap();
+    let raw = zenoh::open(z).await.unwrap();
+    let mut frame = starc_pipeline::link::encode(&detections(1)).unwrap();
+    frame[100] ^= 0x40;
+    let sent = wait_for(Duration::from_secs(5), || {
+        // Keep sending until the rig has seen both (its subscription may take a moment to reach us).
+        let _ = zenoh::Wait::wait(raw.put("starc/robot/detections", b"not a link frame".to_vec()));
+        let _ = zenoh::Wait::wait(raw.put("starc/robot/pose", frame.clone()));
+        rig.health().decode_errors >= 2
+    })
+    .await;
+    assert!(sent, "{:?}", rig.health());
+    assert!(rig.try_recv().is_none(), "a damaged message was delivered");
+    assert_eq!(rig.health().received, 0);
+    raw.close().await.unwrap();
+    rig.close().await.unwrap();
+}
