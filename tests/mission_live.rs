@@ -82,4 +82,26 @@ fn the_live_mission_links_the_nodes_and_aligns_the_rig() {
         let m = rec.pointer(&format!("/rosbags/{}", topic.replace('/', "~1"))).and_then(Value::as_u64).unwrap_or(0);
         assert!(n > 0 && n == m, "{topic}: mcap {n}, rosbags {m}");
     }
+
+    // The recordings rerun offline: the robot's side sees the same scans, so it finds the same
+    // people in the same windows; the rig aligns again.
+    let rerun = dir.path().join("rerun");
+    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+        .arg("replay")
+        .arg(mission.join("robot.mcap"))
+        .arg(mission.join("fpv.mcap"))
+        .arg("--out")
+        .arg(&rerun)
+        .arg("--truth")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    println!("{stdout}");
+    let again: Value = serde_json::from_str(&std::fs::read_to_string(rerun.join("report.json")).unwrap()).unwrap();
+    for key in ["/detection/windows", "/detection/true_positives", "/detection/false_positives"] {
+        assert_eq!(again.pointer(key), report.pointer(key), "{key}: replay {again} live {report}");
+    }
+    assert!(f64_at(&again, "/alignment/first_error_m") < 0.1);
 }

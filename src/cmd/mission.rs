@@ -15,20 +15,18 @@
 //! both LIO trajectories. No link and no nodes in this path: latencies are compute times.
 
 use super::lio::peak_rss_mib;
-use super::lio_input::{internal_imu, lio_scan};
-use super::mission_score::{summary, LatencyReport, MemoryReport, Scorer, Truth};
+use super::mission_input::{self, Input, Side};
+use super::mission_score::{quantiles, summary, LatencyReport, MemoryReport, Scorer, Truth};
 use anyhow::{bail, Context};
 use nalgebra::Isometry3;
 use starc_hil::sim::truth::tum_line;
-use starc_livox::capture;
-use starc_livox::data::DataPacket;
-use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::ar::RenderConfig;
+use starc_pipeline::ar::{CameraModel, RenderConfig};
 use starc_pipeline::mission::{
     render_view, AlignVerdict, Overlay, RigCore, RigCoreConfig, RobotCore, RobotCoreConfig, RobotStep,
 };
 use std::io::Write as _;
 use std::net::Ipv4Addr;
+use std::path::Path;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -60,77 +58,119 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let started = Instant::now();
-    let dir = &args.dir;
-    let out = args.out.clone().unwrap_or_else(|| dir.join("mission"));
-    std::fs::create_dir_all(out.join("ar")).with_context(|| format!("creating {}", out.display()))?;
-    let mut score = Scorer::new(Truth::load(dir)?);
-    let camera = score.truth.mount.camera.clone();
-    let lidar_t_camera = score.truth.mount.lidar_t_camera;
-    let rig_cfg = RigCoreConfig { start_gate_m: args.start_gate_m, ..RigCoreConfig::default() };
+    let truth = Truth::load(&args.dir)?;
+    let inputs = mission_input::from_capture(&args.dir.join("avia.pcap"))?;
+    let run = Offline {
+        out: args.out.clone().unwrap_or_else(|| args.dir.join("mission")),
+        frames_every: args.frames_every,
+        camera: truth.mount.camera.clone(),
+        lidar_t_camera: truth.mount.lidar_t_camera,
+        start: Start::FromTruth { hint_m: args.start_hint_m, hint_deg: args.start_hint_deg },
+        start_gate_m: args.start_gate_m,
+        truth: Some(truth),
+    };
+    run_offline(inputs, run)
+}
 
+/// Where the rig's first alignment is seeded.
+pub enum Start {
+    /// The rig's true start moved `hint_m` and turned `hint_deg` (a simulated run).
+    FromTruth { hint_m: f64, hint_deg: f64 },
+    /// A pose in the robot's map (fpv.toml's `expected_start`).
+    At(Isometry3<f64>),
+}
+
+/// One offline run of both sides.
+pub struct Offline {
+    pub out: PathBuf,
+    pub frames_every: u64,
+    pub camera: CameraModel,
+    pub lidar_t_camera: Isometry3<f64>,
+    pub start: Start,
+    pub start_gate_m: f64,
+    /// With the simulator's truth: the camera frames rendered and scored into report.json.
+    /// Without: a frame after every rig scan, and replay.json with what needs no truth.
+    pub truth: Option<Truth>,
+}
+
+#[derive(serde::Serialize)]
+struct ReplayReport {
+    mode: &'static str,
+    robot_scans: usize,
+    rig_scans: usize,
+    detection_windows: usize,
+    people_detected: usize,
+    alignment_attempts: usize,
+    alignment_accepted: usize,
+    first_accepted_after_s: Option<f64>,
+    compute_ms: super::mission_score::Quantiles,
+    frames: usize,
+    peak_rss_mib: Option<f64>,
+    wall_s: f64,
+}
+
+pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Offline) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let out = &run.out;
+    std::fs::create_dir_all(out.join("ar")).with_context(|| format!("creating {}", out.display()))?;
+    let mut score = run.truth.map(Scorer::new);
+    let rig_cfg = RigCoreConfig { start_gate_m: run.start_gate_m, ..RigCoreConfig::default() };
     let mut robot = RobotCore::new(RobotCoreConfig::default())?;
     let mut rig = RigCore::new(rig_cfg)?;
     let mut overlay = Overlay::new(HOLD_NS);
-    let mut assemblers = [ScanAssembler::new(ScanConfig::default()), ScanAssembler::new(ScanConfig::default())]
-        .map(|a| a.map_err(|e| anyhow::anyhow!("{e}")));
-    let [Ok(robot_assembler), Ok(rig_assembler)] = &mut assemblers else { bail!("scan assembler config") };
-    let (mut robot_tum, mut rig_tum) = (Vec::new(), Vec::new());
+    let (mut robot_tum, mut rig_tum, mut world_tum) = (Vec::new(), Vec::new(), Vec::new());
     let (mut slam_ms, mut viz_ms) = (Vec::new(), Vec::new());
     let mut hint_set = false;
+    if let Start::At(p) = run.start {
+        rig.set_start_hint(p);
+        hint_set = true;
+    }
+    let (mut detection_windows, mut people_detected, mut first_accept_ns) = (0usize, 0usize, None);
     let mut robot_last_ns = 0u64;
     let mut next_frame = 0usize;
+    let mut frames = 0usize;
     let render_cfg = RenderConfig::default();
-    let png_dir = (args.frames_every > 0).then(|| out.join("ar"));
+    let png_dir = (run.frames_every > 0).then(|| out.join("ar"));
 
     let (mut robot_steps, mut rig_outs) = (Vec::<RobotStep>::new(), Vec::new());
-    let cap = capture::open(&dir.join("avia.pcap"))
-        .with_context(|| format!("opening {}", dir.join("avia.pcap").display()))?;
-    for item in cap {
-        let d = item?;
-        let Some(src) = d.src else { continue };
-        let is_robot = *src.ip() == ROBOT_AVIA;
-        if !is_robot && *src.ip() != FPV_AVIA {
-            continue;
-        }
-        let Ok(packet) = DataPacket::parse(&d.payload) else { continue };
-        if let Some(s) = internal_imu(&packet) {
-            if is_robot {
-                robot.push_imu(s, &mut robot_steps);
-            } else {
-                rig.push_imu(s, &mut rig_outs);
-            }
-        } else if !packet.is_imu() {
-            let mut done = Vec::new();
-            if is_robot { &mut *robot_assembler } else { &mut *rig_assembler }.push(&packet, None, &mut done);
-            for scan in done {
-                if is_robot {
-                    robot.push_scan(lio_scan(&scan), &mut robot_steps);
-                } else {
-                    rig.push_scan(lio_scan(&scan), &mut rig_outs);
-                }
-            }
+    for input in inputs {
+        match input? {
+            Input::Imu(Side::Robot, s) => robot.push_imu(s, &mut robot_steps),
+            Input::Imu(Side::Rig, s) => rig.push_imu(s, &mut rig_outs),
+            Input::Scan(Side::Robot, s) => robot.push_scan(s, &mut robot_steps),
+            Input::Scan(Side::Rig, s) => rig.push_scan(s, &mut rig_outs),
         }
         for step in robot_steps.drain(..) {
             let o = &step.output;
-            score.robot_pose(o.end_ns, &o.lidar_pose);
+            if let Some(sc) = score.as_mut() {
+                sc.robot_pose(o.end_ns, &o.lidar_pose);
+            }
             robot_last_ns = o.end_ns;
             robot_tum.push(tum_line(o.end_ns, &o.lidar_pose));
             let mut ms = o.elapsed_us as f64 * 1e-3;
             if let Some(det) = step.detection {
                 ms += det.detect_ms;
-                score.detection(&det);
+                detection_windows += 1;
+                people_detected += det.found.len();
+                if let Some(sc) = score.as_mut() {
+                    sc.detection(&det);
+                }
                 overlay.push(det.stamp_ns, det.people);
             }
             slam_ms.push(ms);
         }
+        let rig_new = !rig_outs.is_empty();
         for o in rig_outs.drain(..) {
             rig_tum.push(tum_line(o.end_ns, &o.lidar_pose));
             if !hint_set {
-                if let (Some(first), Some(l_t_w)) = (rig.first_ns(), score.lio_t_world) {
-                    score.rig_started(first);
-                    rig.set_start_hint(score.truth.start_hint(&l_t_w, first, args.start_hint_m, args.start_hint_deg));
-                    hint_set = true;
+                if let (Some(first), Some(sc), Start::FromTruth { hint_m, hint_deg }) =
+                    (rig.first_ns(), score.as_mut(), &run.start)
+                {
+                    if let Some(l_t_w) = sc.lio_t_world {
+                        sc.rig_started(first);
+                        rig.set_start_hint(sc.truth.start_hint(&l_t_w, first, *hint_m, *hint_deg));
+                        hint_set = true;
+                    }
                 }
             }
             // The robot's map as the rig would hold it from the link's tiles: its newest state.
@@ -145,38 +185,108 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     .map_or((Isometry3::identity(), f64::NAN), |o| (o.world_t_lidar, o.report.total_ms));
                 let verdict = rig.apply(outcome);
                 tracing::info!(?verdict, "rig alignment");
-                score.alignment(end_ns, &world_t_lidar, ms, matches!(verdict, AlignVerdict::Accepted { .. }));
+                let accepted = matches!(verdict, AlignVerdict::Accepted { .. });
+                if accepted && first_accept_ns.is_none() {
+                    first_accept_ns = Some(end_ns.saturating_sub(rig.first_ns().unwrap_or(end_ns)));
+                }
+                if let Some(sc) = score.as_mut() {
+                    sc.alignment(end_ns, &world_t_lidar, ms, accepted);
+                }
+            }
+            if let Ok(Some(w)) = rig.world().world_pose(o.end_ns) {
+                world_tum.push(tum_line(o.end_ns, &w));
             }
         }
-        // Frames once both devices have passed their time.
-        let horizon = robot_last_ns.min(rig.last().map_or(0, |(t, _)| t));
-        while let Some(f) = score.truth.frames.get(next_frame).filter(|f| f.t_ns <= horizon).cloned() {
-            next_frame += 1;
-            rig.world_mut().step_frame();
-            let t0 = Instant::now();
-            let view = render_view(&camera, &lidar_t_camera, &rig, &overlay, f.t_ns, "offline", &render_cfg);
-            let render_ms = t0.elapsed().as_secs_f64() * 1e3;
-            viz_ms.push(render_ms);
-            let keep = png_dir.as_deref().filter(|_| f.index.is_multiple_of(args.frames_every.max(1)));
-            score.frame(&f, &view, render_ms, keep)?;
+        match score.as_mut() {
+            // The camera frames once both devices have passed their time.
+            Some(sc) => {
+                let horizon = robot_last_ns.min(rig.last().map_or(0, |(t, _)| t));
+                while let Some(f) = sc.truth.frames.get(next_frame).filter(|f| f.t_ns <= horizon).cloned() {
+                    next_frame += 1;
+                    rig.world_mut().step_frame();
+                    let t0 = Instant::now();
+                    let view =
+                        render_view(&run.camera, &run.lidar_t_camera, &rig, &overlay, f.t_ns, "offline", &render_cfg);
+                    let render_ms = t0.elapsed().as_secs_f64() * 1e3;
+                    viz_ms.push(render_ms);
+                    frames += 1;
+                    let keep = png_dir.as_deref().filter(|_| f.index.is_multiple_of(run.frames_every.max(1)));
+                    sc.frame(&f, &view, render_ms, keep)?;
+                }
+            }
+            // A frame after every rig scan.
+            None if rig_new => {
+                let Some((t_ns, _)) = rig.last() else { continue };
+                rig.world_mut().step_frame();
+                let t0 = Instant::now();
+                let view = render_view(&run.camera, &run.lidar_t_camera, &rig, &overlay, t_ns, "replay", &render_cfg);
+                viz_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                if let Some(dir) =
+                    png_dir.as_deref().filter(|_| frames.is_multiple_of(run.frames_every.max(1) as usize))
+                {
+                    std::fs::write(dir.join(format!("{frames:06}.png")), view.frame.to_png()?)?;
+                }
+                frames += 1;
+            }
+            None => {}
         }
     }
     if robot_tum.is_empty() || rig.last().is_none() {
         bail!(
-            "{}: the LIO produced no poses for {} (did both devices stand still at power-on?)",
-            dir.display(),
+            "the LIO produced no poses for {} (did both devices stand still at the start?)",
             if robot_tum.is_empty() { "the robot" } else { "the rig" }
         );
     }
-    let viz_p50 = super::mission_score::quantiles(&viz_ms).p50;
+    write_tum(out, "robot.tum", &robot_tum)?;
+    write_tum(out, "rig.tum", &rig_tum)?;
+    write_tum(out, "rig_world.tum", &world_tum)?;
+    let viz_p50 = quantiles(&viz_ms).p50;
     let total: Vec<f64> = slam_ms.iter().map(|s| s + viz_p50).collect();
-    let latency = LatencyReport::from_parts(&slam_ms, &[], &viz_ms, &total);
-    let memory = MemoryReport { peak_rss_mib: peak_rss_mib(), note: None };
-    let report = score.finish("offline", latency, &total, memory, started.elapsed().as_secs_f64(), &out)?;
-    std::fs::write(out.join("robot.tum"), robot_tum.join("\n") + "\n")?;
-    std::fs::write(out.join("rig.tum"), rig_tum.join("\n") + "\n")?;
     let mut stdout = std::io::stdout().lock();
-    write!(stdout, "{}", summary(&report))?;
-    writeln!(stdout, "  wrote {} (report.json, frames.csv, ar/, plots/, robot.tum, rig.tum)", out.display())?;
+    if let Some(sc) = score {
+        let latency = LatencyReport::from_parts(&slam_ms, &[], &viz_ms, &total);
+        let memory = MemoryReport { peak_rss_mib: peak_rss_mib(), note: None };
+        let report = sc.finish("offline", latency, &total, memory, started.elapsed().as_secs_f64(), out)?;
+        write!(stdout, "{}", summary(&report))?;
+        writeln!(
+            stdout,
+            "  wrote {} (report.json, frames.csv, ar/, plots/, robot.tum, rig.tum, rig_world.tum)",
+            out.display()
+        )?;
+    } else {
+        let r = ReplayReport {
+            mode: "replay",
+            robot_scans: robot_tum.len(),
+            rig_scans: rig_tum.len(),
+            detection_windows,
+            people_detected,
+            alignment_attempts: rig.attempts,
+            alignment_accepted: rig.accepted,
+            first_accepted_after_s: first_accept_ns.map(|ns| ns as f64 * 1e-9),
+            compute_ms: quantiles(&total),
+            frames,
+            peak_rss_mib: peak_rss_mib(),
+            wall_s: started.elapsed().as_secs_f64(),
+        };
+        std::fs::write(out.join("replay.json"), serde_json::to_string_pretty(&r)? + "\n")?;
+        writeln!(
+            stdout,
+            "replay: robot {} scans, {} detection windows ({} people); rig {} scans, {} of {} alignments accepted{}; {} AR frames",
+            r.robot_scans,
+            r.detection_windows,
+            r.people_detected,
+            r.rig_scans,
+            r.alignment_accepted,
+            r.alignment_attempts,
+            r.first_accepted_after_s.map_or(String::new(), |t| format!(" (first {t:.1} s after the rig started)")),
+            r.frames
+        )?;
+        writeln!(stdout, "  wrote {} (replay.json, ar/, robot.tum, rig.tum, rig_world.tum)", out.display())?;
+    }
     Ok(())
+}
+
+fn write_tum(out: &Path, name: &str, lines: &[String]) -> anyhow::Result<()> {
+    let path = out.join(name);
+    std::fs::write(&path, lines.join("\n") + "\n").with_context(|| format!("writing {}", path.display()))
 }

@@ -12,6 +12,7 @@ pub mod lio;
 pub mod lio_input;
 pub mod livox;
 pub mod mission;
+pub mod mission_input;
 mod mission_score;
 mod mission_truth;
 pub mod mock;
