@@ -38,6 +38,12 @@ pub struct Args {
     /// Run the mission offline, in one process without nodes or link (`starc mission DIR`).
     #[arg(long)]
     offline: bool,
+    /// Live mission: serve the rig's AR view in a browser here (e.g. 127.0.0.1:8080).
+    #[arg(long)]
+    http: Option<std::net::SocketAddr>,
+    /// Live mission: serve the Foxglove WebSocket view here (e.g. 127.0.0.1:8765).
+    #[arg(long)]
+    foxglove: Option<std::net::SocketAddr>,
     /// Write every Nth camera frame's AR view as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     frames_every: u64,
@@ -126,6 +132,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint_m: 1.0,
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
+            view: crate::view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
         };
         super::sim_live::run(&args.out, &opts)?;
     }

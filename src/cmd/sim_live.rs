@@ -40,6 +40,8 @@ pub struct LiveOptions {
     pub start_hint_m: f64,
     pub start_hint_deg: f64,
     pub start_gate_m: f64,
+    /// The rig node's live views (browser, Foxglove) while the mission runs.
+    pub view: crate::view::ViewConfig,
 }
 
 fn free_port() -> anyhow::Result<u16> {
@@ -146,7 +148,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         expected_start: Some(StartPose { position_m: [t.x, t.y, t.z], yaw_deg: hint_yaw.to_degrees() }),
         start_gate_m: opts.start_gate_m,
         shared_lidar_clock: true,
-        view: crate::view::ViewConfig::default(),
+        view: opts.view.clone(),
         record: Some(opts.out.join("fpv.mcap")),
         record_frames_every: 5,
         link: link(None, Some(link_port))?,

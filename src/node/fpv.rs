@@ -17,6 +17,8 @@ use starc_livox::live::{LivoxDriver, LivoxEvent};
 use starc_pipeline::align::TileMap;
 use starc_pipeline::lio::ImuSample;
 use starc_pipeline::mission::{render_view, AlignOutcome, AlignVerdict, Overlay, RigCore, RigCoreConfig, View};
+use starc_pipeline::record::msgs::{CompressedImage, Header, Time};
+use starc_pipeline::record::Topic;
 use starc_pipeline::PipelineError;
 use std::net::Ipv4Addr;
 use std::time::Instant;
@@ -100,7 +102,7 @@ pub async fn run(
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "fpv")).transpose()?;
     let hub = ViewHub::new();
     let (views_stop, views_shutdown) = tokio::sync::watch::channel(false);
-    let _views = start_views(&cfg.view, hub.clone(), views_shutdown).await.context("starting the views")?;
+    let views = start_views(&cfg.view, hub.clone(), views_shutdown).await.context("starting the views")?;
     let mut link = LinkNode::open(&cfg.link, Role::Rig).await.context("opening the link")?;
     let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
     tracing::info!(host = ?driver.host, "rig node up");
@@ -271,6 +273,15 @@ pub async fn run(
             };
             match hub.publish(&view.frame, status) {
                 Ok(snapshot) => {
+                    // Foxglove's image panel gets the same PNG the browser does.
+                    if let (Some(fox), Some(stamp)) = (views.foxglove.as_ref(), Time::from_ns(t_ns)) {
+                        let msg = CompressedImage {
+                            header: Header { stamp, frame_id: "fpv_camera".into() },
+                            format: "png".into(),
+                            data: snapshot.png.to_vec(),
+                        };
+                        let _ = fox.publish_msg(Topic::ArImage.name(), t_ns, &msg);
+                    }
                     if let Some(r) = recorder.as_mut().filter(|_| summary.frames % cfg.record_frames_every.max(1) == 0)
                     {
                         r.ar_frame(t_ns, &snapshot.png);
