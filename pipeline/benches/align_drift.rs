@@ -13,7 +13,8 @@
 //! (window of a re-registration, default 8), STARC_DRIFT_FIRST_WINDOW_S (of the first, default 10),
 //! STARC_DRIFT_MIN_DEGENERACY (acceptance of re-registrations, default the aligner's 0.01),
 //! STARC_DRIFT_GUESS_M / _DEG (how far the first registration's guess is off the truth, default
-//! 0.3 m and 5 deg), STARC_DRIFT_FIRST_SEARCH=1 (the first registration with the seed search).
+//! 0.3 m and 5 deg), STARC_DRIFT_FIRST_SEARCH=1 (the first registration with the seed search),
+//! STARC_DRIFT_HALF_GAIN (`WorldPoseConfig::half_gain_info`; 0 follows every registration fully).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "align_sim/mod.rs"]
@@ -22,7 +23,7 @@ mod align_sim;
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use starc_pipeline::align::{aggregate_window, pose_error, AggregateStats, AlignConfig, Aligner, Vec3, WindowConfig};
 use starc_pipeline::lio::{Lio, LioConfig, LioScan, ScanOutput};
-use starc_pipeline::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
+use starc_pipeline::pose::{Constraint, PoseBuffer, WorldPose, WorldPoseConfig};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -119,7 +120,12 @@ fn main() {
     }
     println!("LIO: {} scan outputs", lio_out.len());
 
-    let config = WorldPoseConfig::default();
+    // STARC_DRIFT_HALF_GAIN: the per-direction fusion's half-gain information (0: follow every
+    // registration, as before the fusion).
+    let config = WorldPoseConfig {
+        half_gain_info: env_f64("STARC_DRIFT_HALF_GAIN", WorldPoseConfig::default().half_gain_info),
+        ..WorldPoseConfig::default()
+    };
     let mut corrected = WorldPose::new(config.clone());
     let mut lio_only = WorldPose::new(config.clone());
     let mut odom = PoseBuffer::new(1_000_000);
@@ -168,7 +174,18 @@ fn main() {
                 if lio_only.correction().is_none() {
                     lio_only.push_registration(now, report.pose).unwrap();
                 }
-                let outcome = corrected.push_registration(now, report.pose).unwrap();
+                // Per-direction fusion: only what the window pins down moves the correction.
+                let constraint = report.best().and_then(|a| {
+                    Constraint::from_rows(
+                        &a.metrics.information,
+                        a.metrics.information_centre_m,
+                        a.metrics.information_radius_m,
+                    )
+                });
+                let outcome = match constraint {
+                    Some(c) => corrected.push_registration_constrained(now, report.pose, &c).unwrap(),
+                    None => corrected.push_registration(now, report.pose).unwrap(),
+                };
                 event = format!("accepted, {outcome:?} ({:.1} cm {:.2} deg off the truth)", e_m * 100.0, e_deg);
             } else {
                 rejected += 1;

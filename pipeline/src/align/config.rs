@@ -199,6 +199,21 @@ impl AlignConfig {
         if self.seed_levels == 0 || self.seed_levels > self.ndt_resolutions_m.len() {
             return bad("seed_levels must be between 1 and the number of NDT levels");
         }
+        let checks = [
+            self.verify_shift_m,
+            self.verify_yaw_deg,
+            self.verify_converged_update,
+            self.verify_agree_m,
+            self.verify_agree_deg,
+            self.ambiguity_margin,
+            self.ambiguity_inlier_margin,
+        ];
+        if checks.iter().any(|v| !(v.is_finite() && *v >= 0.0)) || !(0.0..1.0).contains(&self.verify_margin) {
+            return bad("verify_* and ambiguity_* settings must be finite and not negative, verify_margin in [0, 1)");
+        }
+        if self.verify_shift_m > 0.0 && self.verify_max_points == 0 {
+            return bad("verify_max_points must be at least 1 when the consistency check is on");
+        }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");
         }

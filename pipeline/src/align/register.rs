@@ -175,6 +175,10 @@ impl Aligner {
     /// accepted. With it off, one full attempt runs from `initial`.
     pub fn align(&self, source: &[Vec3], initial: &Isometry3<f64>) -> AlignReport {
         let c = &self.config;
+        // A guess whose quaternion is off unit length would keep that error through every
+        // product below (and scale the points it turns): renormalised first.
+        let initial =
+            &Isometry3::from_parts(initial.translation, UnitQuaternion::new_normalize(*initial.rotation.quaternion()));
         let t0 = Instant::now();
         // Finest reduction first; the coarser ones are taken from it (cheaper than from the raw scan).
         let icp_source = voxel_downsample(source, c.icp_voxel_m);

@@ -200,6 +200,9 @@ fn config_defaults_and_example_load() {
     assert!(AlignConfig::from_toml("max_rms_m = 0.1\nbogus = 1\n").is_err());
     assert!(AlignConfig::from_toml("icp_trim_ratio = 1.5\n").is_err());
     assert!(AlignConfig::from_toml("ndt_resolutions_m = []\n").is_err());
+    assert!(AlignConfig::from_toml("verify_margin = 1.0\n").is_err());
+    assert!(AlignConfig::from_toml("ambiguity_margin = -0.1\n").is_err());
+    assert!(AlignConfig::from_toml("verify_max_points = 0\n").is_err());
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! A bounded buffer of timed poses, interpolated on SE(3) at any time inside its span.
 
 use crate::PipelineError;
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, UnitQuaternion};
 use std::collections::VecDeque;
 
 /// Timed poses in increasing time order (ns, one clock), at most `capacity` (the oldest go).
@@ -41,6 +41,15 @@ impl PoseBuffer {
         if !finite {
             return Err(PipelineError::BadPose { t_ns, reason: "not finite".into() });
         }
+        // Rotations from a filter's state can drift off unit length (a quaternion built from a
+        // not-quite-orthonormal matrix); the composition `applied · now · step · now⁻¹` of the
+        // bounded correction then turns that error into metres per frame at a rig far from the
+        // odometry origin. Renormalised here, once, for every consumer.
+        let norm = pose.rotation.quaternion().norm();
+        if !(norm > 0.5 && norm < 2.0) {
+            return Err(PipelineError::BadPose { t_ns, reason: format!("rotation quaternion of norm {norm}") });
+        }
+        let pose = Isometry3::from_parts(pose.translation, UnitQuaternion::new_normalize(*pose.rotation.quaternion()));
         if let Some(&(last, _)) = self.poses.back() {
             if t_ns <= last {
                 return Err(PipelineError::BadPose { t_ns, reason: format!("not after the last pose ({last} ns)") });

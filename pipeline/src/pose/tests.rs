@@ -203,3 +203,33 @@ fn constrained_registration_slides_only_along_pinned_directions() {
     assert!(moved.translation.x.abs() < 1e-6, "the hall's axis stays with the LIO: {moved:?}");
     assert!((moved.translation.y - 0.04 * 0.8).abs() < 1e-6, "{moved:?}");
 }
+
+#[test]
+fn non_unit_rotations_are_renormalised() {
+    // A registration whose quaternion is 3 % short (a lerped guess carried through the solver).
+    let mut w = WorldPose::new(WorldPoseConfig::default());
+    for k in 0..=100u64 {
+        w.push_odometry(k * 10_000_000, rig_odometry(k * 10_000_000)).unwrap();
+    }
+    let w_t_o = pose(5.0, 2.0, 0.3, 30.0);
+    let short = |p: Isometry3<f64>| {
+        Isometry3::from_parts(p.translation, UnitQuaternion::new_unchecked(p.rotation.quaternion() * 0.97))
+    };
+    w.push_registration(500_000_000, short(w_t_o * rig_odometry(500_000_000))).unwrap();
+    let later = short(w_t_o * pose(0.05, 0.0, 0.0, 0.5) * rig_odometry(900_000_000));
+    w.push_registration_constrained(900_000_000, later, &hall_constraint()).unwrap();
+    for _ in 0..200 {
+        w.step_frame();
+    }
+    let q = w.correction().unwrap().rotation.quaternion().norm();
+    assert!((q - 1.0).abs() < 1e-12, "{q}");
+    let (m, _) = crate::align::pose_error(
+        &w.world_pose(1_000_000_000).unwrap().unwrap(),
+        &(w_t_o * rig_odometry(1_000_000_000)),
+    );
+    assert!(m < 0.1, "{m}");
+    // Odometry poses are renormalised as they enter the buffer.
+    let mut b = PoseBuffer::new(4);
+    b.push(1, short(pose(1.0, 2.0, 3.0, 40.0))).unwrap();
+    assert!((b.at(1).unwrap().rotation.quaternion().norm() - 1.0).abs() < 1e-12);
+}

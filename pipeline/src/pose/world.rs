@@ -213,7 +213,7 @@ impl WorldPose {
         w_t_fpv: Isometry3<f64>,
     ) -> Result<RegistrationOutcome, PipelineError> {
         let o_t_fpv = self.odom.at(t_ns)?;
-        let w_t_o = w_t_fpv * o_t_fpv.inverse();
+        let w_t_o = unit(&(unit(&w_t_fpv) * o_t_fpv.inverse()));
         let c = &self.config;
         let outcome = match (&self.applied, self.odom.latest()) {
             (None, _) | (_, None) => RegistrationOutcome::Initial,
@@ -258,6 +258,7 @@ impl WorldPose {
     ) -> Result<RegistrationOutcome, PipelineError> {
         let base = self.target.or(self.applied);
         let Some(base) = base else { return self.push_registration(t_ns, w_t_fpv) };
+        let w_t_fpv = unit(&w_t_fpv);
         let o_t_fpv = self.odom.at(t_ns)?;
         let predicted = base * o_t_fpv;
         // Classified on the full registration (snap and refuse judge what it claims); a sliding
@@ -265,7 +266,7 @@ impl WorldPose {
         let outcome = self.push_registration(t_ns, w_t_fpv)?;
         if outcome == RegistrationOutcome::Sliding {
             let kept = constraint.filter(&(predicted.inverse() * w_t_fpv), self.config.half_gain_info);
-            self.target = Some(predicted * kept * o_t_fpv.inverse());
+            self.target = Some(unit(&(predicted * kept * o_t_fpv.inverse())));
         }
         Ok(outcome)
     }
@@ -292,7 +293,7 @@ impl WorldPose {
                 Translation3::from(e.translation.vector * f),
                 UnitQuaternion::from_scaled_axis(e.rotation.scaled_axis() * f),
             );
-            self.applied = Some(from * step * now.inverse());
+            self.applied = Some(unit(&(from * step * now.inverse())));
             (step, step.inverse() * e)
         };
         CorrectionStep {
@@ -314,6 +315,19 @@ impl WorldPose {
     pub fn correction(&self) -> Option<Isometry3<f64>> {
         self.applied
     }
+
+    /// The correction the one in use is sliding towards (the latest registration's `wT_o`).
+    pub fn target_correction(&self) -> Option<Isometry3<f64>> {
+        self.target
+    }
+}
+
+/// The pose with its rotation renormalised. A quaternion off unit length (a guess interpolated
+/// by lerp, say) scales every vector it turns by its squared norm, and products compound it: a
+/// 0.996 guess became 0.973 after a dozen registrations in the drift bench and put the rig metres
+/// off; so every pose that enters, and every product kept, is renormalised.
+pub(crate) fn unit(p: &Isometry3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(p.translation, UnitQuaternion::new_normalize(*p.rotation.quaternion()))
 }
 
 /// How far apart two world corrections put the rig at odometry pose `now` (m, deg).
