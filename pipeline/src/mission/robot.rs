@@ -28,6 +28,9 @@ pub struct RobotCoreConfig {
     /// Edge and quantization of the map tiles sent to the rig.
     pub tile_edge_m: f64,
     pub tile_step_m: f64,
+    /// Only a person's points this close (in the floor plane) to the median of their points are
+    /// drawn: what the cluster took from a chair or a wall beside them is not (0: all).
+    pub person_radius_m: f64,
 }
 
 impl Default for RobotCoreConfig {
@@ -40,6 +43,7 @@ impl Default for RobotCoreConfig {
             fresh_points_ns: 100_000_000,
             tile_edge_m: 4.0,
             tile_step_m: 0.01,
+            person_radius_m: 0.25,
         }
     }
 }
@@ -152,13 +156,14 @@ impl RobotCore {
         let people = found
             .iter()
             .map(|det| ArPerson {
-                points_world: det
-                    .point_indices
-                    .iter()
-                    .filter_map(|&i| points.get(i as usize))
-                    .filter(|p| p.t_ns >= fresh_from)
-                    .map(WindowPoint::xyz)
-                    .collect(),
+                points_world: core_points(
+                    det.point_indices
+                        .iter()
+                        .filter_map(|&i| points.get(i as usize))
+                        .filter(|p| p.t_ns >= fresh_from)
+                        .map(WindowPoint::xyz),
+                    self.cfg.person_radius_m,
+                ),
                 bbox: Some(OrientedBox { centre_m: det.centre_m, size_m: det.size_m, yaw_rad: det.yaw_rad }),
                 age_ns: 0,
             })
@@ -198,4 +203,20 @@ impl RobotCore {
         let tiles = encode_tiles(&points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version)?;
         Ok(tiles.into_iter().map(|(_, bytes)| bytes).collect())
     }
+}
+
+/// The points within `radius_m` (horizontally) of their per-axis median; all when `radius_m` is 0.
+fn core_points(points: impl Iterator<Item = Vector3<f64>>, radius_m: f64) -> Vec<Vector3<f64>> {
+    let all: Vec<Vector3<f64>> = points.collect();
+    if radius_m <= 0.0 || all.is_empty() {
+        return all;
+    }
+    let median = |f: fn(&Vector3<f64>) -> f64| {
+        let mut v: Vec<f64> = all.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let (mx, my) = (median(|p| p.x), median(|p| p.y));
+    let r2 = radius_m * radius_m;
+    all.into_iter().filter(|p| (p.x - mx).powi(2) + (p.y - my).powi(2) <= r2).collect()
 }
