@@ -268,7 +268,12 @@ async fn serve_client(stream: TcpStream, shared: &Arc<Shared>, mut shutdown: Shu
                     let reply = proto::status(2, "client publishing is not supported");
                     send(&mut sink, Message::Text(reply.into())).await?;
                 }
-                Some(Ok(Message::Close(_))) | None => return Ok(()),
+                Some(Ok(Message::Close(_))) | None => {
+                    // Flushes tungstenite's queued close reply; without it the client waits out
+                    // its close timeout.
+                    let _ = tokio::time::timeout(WRITE_TIMEOUT, sink.close()).await;
+                    return Ok(());
+                }
                 // Pings are answered by tungstenite itself.
                 Some(Ok(_)) => {}
                 Some(Err(e)) => return Err(e.to_string()),

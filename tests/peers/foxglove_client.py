@@ -48,7 +48,9 @@ def summarize(topic, msg):
 
 
 async def receive(url, n, topics):
-    async with websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None) as ws:
+    # max_queue=None: with a bounded queue, websockets stops reading the socket once frames it
+    # was not asked for pile up, and then waits out its close timeout for our close reply.
+    async with websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None, max_queue=None) as ws:
         info, advertise = await hello(ws)
         channels = {c["topic"]: c for c in advertise["channels"]}
         subs = {}
