@@ -96,6 +96,9 @@ pub struct AlignConfig {
     pub ambiguity_seeds: usize,
     pub ambiguity_margin: f64,
     pub ambiguity_inlier_margin: f64,
+    /// Only seeds whose coarse NDT score reaches this share of the accepted seed's are refined by
+    /// the ambiguity check (0: every seed; 1: only seeds scoring at least as well).
+    pub ambiguity_score_ratio: f64,
 }
 
 impl Default for AlignConfig {
@@ -141,6 +144,7 @@ impl Default for AlignConfig {
             ambiguity_seeds: 2,
             ambiguity_margin: 0.25,
             ambiguity_inlier_margin: 0.01,
+            ambiguity_score_ratio: 0.8,
         }
     }
 }
@@ -207,6 +211,7 @@ impl AlignConfig {
             self.verify_agree_deg,
             self.ambiguity_margin,
             self.ambiguity_inlier_margin,
+            self.ambiguity_score_ratio,
         ];
         if checks.iter().any(|v| !(v.is_finite() && *v >= 0.0)) || !(0.0..1.0).contains(&self.verify_margin) {
             return bad("verify_* and ambiguity_* settings must be finite and not negative, verify_margin in [0, 1)");

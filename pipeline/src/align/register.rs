@@ -252,7 +252,7 @@ impl Aligner {
             let mut a = self.attempt(ndt_source, icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
             let done = a.accepted;
             if done && c.ambiguity_seeds > 0 {
-                self.check_ambiguity(seeds, ndt_source, icp_source, after_seeds, tried, &mut a);
+                self.check_ambiguity(seeds, s.score, ndt_source, icp_source, after_seeds, tried, &mut a);
             }
             let stop = done || a.ambiguous;
             attempts.push(a);
@@ -263,13 +263,15 @@ impl Aligner {
     }
 
     /// Ambiguity check of an accepted attempt: the next `ambiguity_seeds` distinct seeds of the
-    /// ranking, each refined (the remaining NDT levels, then ICP on the thinned source), must not
+    /// ranking whose coarse NDT score is at least `ambiguity_score_ratio` of the accepted seed's, each refined (the remaining NDT levels, then ICP on the thinned source), must not
     /// land elsewhere with a fit about as good or better (RMS at most `ambiguity_margin` above,
     /// inlier ratio at most `ambiguity_inlier_margin` below, on the same thinned points): a corridor or a repeated structure fits in several places, and a place the map lacks
     /// can fit somewhere else; either way the first good fit is a coin toss, so it is rejected.
+    #[allow(clippy::too_many_arguments)]
     fn check_ambiguity(
         &self,
         seeds: &[Seed],
+        accepted_score: f64,
         ndt_source: &[Vec3],
         icp_source: &[Vec3],
         first_level: usize,
@@ -290,7 +292,10 @@ impl Aligner {
             if a.alternatives.len() >= c.ambiguity_seeds {
                 break;
             }
-            if !distinct(&s.pose, &a.pose)
+            // Only seeds whose coarse score comes close to the accepted seed's are contenders
+            // (scores are negative, lower is better).
+            if s.score > accepted_score * c.ambiguity_score_ratio
+                || !distinct(&s.pose, &a.pose)
                 || tried.iter().any(|t| !distinct(t, &s.pose))
                 || checked.iter().any(|t| !distinct(t, &s.pose))
             {
