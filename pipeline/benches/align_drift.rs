@@ -14,7 +14,8 @@
 //! STARC_DRIFT_MIN_DEGENERACY (acceptance of re-registrations, default the aligner's 0.01),
 //! STARC_DRIFT_GUESS_M / _DEG (how far the first registration's guess is off the truth, default
 //! 0.3 m and 5 deg), STARC_DRIFT_FIRST_SEARCH=1 (the first registration with the seed search),
-//! STARC_DRIFT_HALF_GAIN (`WorldPoseConfig::half_gain_info`; 0 follows every registration fully).
+//! STARC_DRIFT_HALF_GAIN (`WorldPoseConfig::half_gain_info`; 0 follows every registration fully),
+//! STARC_DRIFT_GATE_M / STARC_DRIFT_GATE_M_PER_S (`WorldPoseConfig::gate_m`, `gate_m_per_s`; 0: off).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "align_sim/mod.rs"]
@@ -124,6 +125,8 @@ fn main() {
     // registration, as before the fusion).
     let config = WorldPoseConfig {
         half_gain_info: env_f64("STARC_DRIFT_HALF_GAIN", WorldPoseConfig::default().half_gain_info),
+        gate_m: env_f64("STARC_DRIFT_GATE_M", 0.0),
+        gate_m_per_s: env_f64("STARC_DRIFT_GATE_M_PER_S", 0.0),
         ..WorldPoseConfig::default()
     };
     let mut corrected = WorldPose::new(config.clone());
@@ -245,10 +248,11 @@ fn main() {
     let (cd_rms, _, cd_end) = stat(&|r| r.corrected_deg);
     // The largest frame-to-frame change of the corrected pose beyond the rig's own motion.
     println!(
-        "{} frames at 30 Hz over {:.1} s; registrations: {accepted} accepted ({} refused by the world pose as too far, {} snapped), {rejected} rejected by the aligner; align median {:.1} ms",
+        "{} frames at 30 Hz over {:.1} s; registrations: {accepted} accepted ({} refused by the world pose as too far, {} of them by the gate, {} snapped), {rejected} rejected by the aligner; align median {:.1} ms",
         rows.len(),
         rows.last().map_or(0.0, |r| r.t_s) - rows.first().map_or(0.0, |r| r.t_s),
         corrected.refused,
+        corrected.gated,
         corrected.snaps,
         {
             align_ms.sort_by(f64::total_cmp);

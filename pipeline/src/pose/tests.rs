@@ -233,3 +233,26 @@ fn non_unit_rotations_are_renormalised() {
     b.push(1, short(pose(1.0, 2.0, 3.0, 40.0))).unwrap();
     assert!((b.at(1).unwrap().rotation.quaternion().norm() - 1.0).abs() < 1e-12);
 }
+
+#[test]
+fn innovation_gate_refuses_large_claims_soon_after_the_last() {
+    let config = WorldPoseConfig { gate_m: 0.05, gate_m_per_s: 0.01, ..WorldPoseConfig::default() };
+    let mut w = WorldPose::new(config);
+    for k in 0..=2000u64 {
+        w.push_odometry(k * 10_000_000, rig_odometry(k * 10_000_000)).unwrap();
+    }
+    let w_t_o = pose(5.0, 2.0, 0.3, 30.0);
+    w.push_registration(1_000_000_000, w_t_o * rig_odometry(1_000_000_000)).unwrap();
+    // 12 cm claimed 1 s later: beyond 5 cm + 1 cm/s.
+    let claim = |t: u64| w_t_o * rig_odometry(t) * pose(0.12, 0.0, 0.0, 0.0);
+    assert_eq!(w.push_registration(2_000_000_000, claim(2_000_000_000)).unwrap(), RegistrationOutcome::Refused);
+    assert_eq!((w.refused, w.gated), (1, 1));
+    // 4 cm is within the gate.
+    let small = w_t_o * rig_odometry(3_000_000_000) * pose(0.04, 0.0, 0.0, 0.0);
+    assert_eq!(w.push_registration(3_000_000_000, small).unwrap(), RegistrationOutcome::Sliding);
+    // The same 12 cm (from the new target) 8 s after that: the gate has grown to 13 cm.
+    let t = 11_000_000_000;
+    let again = w.target_correction().unwrap() * rig_odometry(t) * pose(0.12, 0.0, 0.0, 0.0);
+    assert_eq!(w.push_registration(t, again).unwrap(), RegistrationOutcome::Sliding);
+    assert_eq!(w.gated, 1);
+}

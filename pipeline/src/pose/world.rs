@@ -42,6 +42,14 @@ pub struct WorldPoseConfig {
     /// by a sixth of a registration's claim, a room's well-seen walls (λ ≈ 0.1-0.3) by two thirds
     /// or more; repeated registrations converge where they agree. 0: follow every registration.
     pub half_gain_info: f64,
+    /// Innovation gate (0: off): a registration that would slide the correction is refused when
+    /// it moves the rig (against the latest target, at the rig's latest pose) by more than
+    /// `gate_m + gate_m_per_s` times the seconds since the last registration taken. The LIO
+    /// drifts centimetres per second at most, so a larger claim over a short time is more likely
+    /// the registration's error (a window bent by the LIO, a hall's axis) than drift; the bound
+    /// grows with time, so a real drift is taken once it has had time to build up.
+    pub gate_m: f64,
+    pub gate_m_per_s: f64,
 }
 
 impl Default for WorldPoseConfig {
@@ -55,6 +63,8 @@ impl Default for WorldPoseConfig {
             refuse_m: 3.0,
             refuse_deg: 30.0,
             half_gain_info: 0.05,
+            gate_m: 0.0,
+            gate_m_per_s: 0.0,
         }
     }
 }
@@ -66,7 +76,7 @@ impl WorldPoseConfig {
         let positive = [c.max_step_m, c.max_step_deg, c.snap_m, c.snap_deg, c.refuse_m, c.refuse_deg];
         if c.buffer_len < 2
             || positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
-            || !(c.half_gain_info.is_finite() && c.half_gain_info >= 0.0)
+            || [c.half_gain_info, c.gate_m, c.gate_m_per_s].iter().any(|v| !(v.is_finite() && *v >= 0.0))
         {
             return Err(PipelineError::BadFile {
                 format: "world pose config",
@@ -167,10 +177,14 @@ pub struct WorldPose {
     odom: PoseBuffer,
     applied: Option<Isometry3<f64>>,
     target: Option<Isometry3<f64>>,
-    /// Registrations taken, how many of them snapped, how many were refused.
+    /// Registrations taken, how many of them snapped, how many were refused (of those, how
+    /// many by the innovation gate).
     pub registrations: u32,
     pub snaps: u32,
     pub refused: u32,
+    pub gated: u32,
+    /// When the last registration was taken (for the gate).
+    last_taken_ns: Option<u64>,
 }
 
 impl WorldPose {
@@ -183,6 +197,8 @@ impl WorldPose {
             registrations: 0,
             snaps: 0,
             refused: 0,
+            gated: 0,
+            last_taken_ns: None,
         }
     }
 
@@ -223,6 +239,9 @@ impl WorldPose {
                     RegistrationOutcome::Refused
                 } else if m > c.snap_m || deg > c.snap_deg {
                     RegistrationOutcome::Snapped
+                } else if self.gated_out(t_ns, &w_t_o, &now) {
+                    self.gated += 1;
+                    RegistrationOutcome::Refused
                 } else {
                     RegistrationOutcome::Sliding
                 }
@@ -242,7 +261,19 @@ impl WorldPose {
         }
         self.registrations += 1;
         self.target = Some(w_t_o);
+        self.last_taken_ns = Some(t_ns);
         Ok(outcome)
+    }
+
+    /// Whether the innovation gate refuses `w_t_o` (see [`WorldPoseConfig::gate_m`]).
+    fn gated_out(&self, t_ns: u64, w_t_o: &Isometry3<f64>, now: &Isometry3<f64>) -> bool {
+        let c = &self.config;
+        let (Some(target), Some(last)) = (self.target, self.last_taken_ns) else { return false };
+        if c.gate_m <= 0.0 {
+            return false;
+        }
+        let (m, _) = at_rig(&target, w_t_o, now);
+        m > c.gate_m + c.gate_m_per_s * t_ns.saturating_sub(last) as f64 * 1e-9
     }
 
     /// Like [`Self::push_registration`], but a registration that would slide the correction moves
