@@ -184,6 +184,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (mut robot_tum, mut rig_tum) = (Vec::new(), Vec::new());
     let (mut slam, mut comm, mut viz, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut detections, mut frames) = (0u64, 0u64);
+    let mut detect_ms = Vec::new();
     let png_dir = opts.out.join("ar");
     let (err_tx, err_rx) = std_mpsc::channel::<anyhow::Error>();
     let mut last_progress = Instant::now();
@@ -198,6 +199,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
                 }
                 RobotEvent::Detection { detection } => {
                     detections += 1;
+                    detect_ms.push(detection.detect_ms);
                     score.detection(&detection);
                 }
             }
@@ -259,6 +261,8 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
             if robot_tum.is_empty() { "robot poses" } else { "rig scans" }
         );
     }
+    let dq = super::mission_score::quantiles(&detect_ms);
+    tracing::info!(p50_ms = dq.p50, p99_ms = dq.p99, "robot node: person detection compute per window");
     let latency = LatencyReport::from_parts(&slam, &comm, &viz, &total);
     let memory = MemoryReport {
         peak_rss_mib: peak_rss_mib(),

@@ -154,7 +154,8 @@ pub async fn run(
                         };
                         let comm_ns = got.latency_ns.or(got.raw_latency_ns).unwrap_or(0);
                         let slam_ns = sent_host_ns as i64 - scan_last_packet_host_ns as i64;
-                        if !people.is_empty() {
+                        // Only what can be drawn now counts: people, and the rig placed in the map.
+                        if !people.is_empty() && core.aligned() {
                             waiting.push(Waiting { stamp_ns: stamp_here, slam_ns, comm_ns, recv_host_ns: got.recv_host_ns });
                         }
                         newest_detection_ns = newest_detection_ns.max(stamp_here);
@@ -224,24 +225,6 @@ pub async fn run(
             }
         }
         let Some((last_ns, _)) = core.last() else { continue };
-        // A scheduled frame renders once the rig has passed its time and the robot's detection
-        // of that instant has arrived (or SCHEDULED_WAIT after), as the live view would show it
-        // then: a frame is re-rendered whenever a detection arrives.
-        while let Some(&(index, t_ns)) = schedule.get(next_scheduled).filter(|(_, t)| *t <= last_ns) {
-            let since = *passed_at.get_or_insert_with(Instant::now);
-            if newest_detection_ns < t_ns && since.elapsed() < SCHEDULED_WAIT {
-                break;
-            }
-            passed_at = None;
-            next_scheduled += 1;
-            core.world_mut().step_frame();
-            let t0 = Instant::now();
-            let view = render_view(&camera, &lidar_t_camera, &core, &overlay, t_ns, link_state(&link), &render_cfg);
-            let render_ms = t0.elapsed().as_secs_f64() * 1e3;
-            if let Some(w) = &watch {
-                let _ = w.send(FpvEvent::Frame { index, t_ns, view: Box::new(view), render_ms });
-            }
-        }
         if render_live {
             let t_ns = last_ns.max(newest_detection_ns);
             if schedule.is_empty() {
@@ -288,6 +271,24 @@ pub async fn run(
                     }
                 }
                 Err(e) => tracing::warn!("frame not published: {e}"),
+            }
+        }
+        // A scheduled frame renders once the rig has passed its time and the robot's detection
+        // of that instant has arrived (or SCHEDULED_WAIT after), as the live view would show it
+        // then: a frame is re-rendered whenever a detection arrives.
+        while let Some(&(index, t_ns)) = schedule.get(next_scheduled).filter(|(_, t)| *t <= last_ns) {
+            let since = *passed_at.get_or_insert_with(Instant::now);
+            if newest_detection_ns < t_ns && since.elapsed() < SCHEDULED_WAIT {
+                break;
+            }
+            passed_at = None;
+            next_scheduled += 1;
+            core.world_mut().step_frame();
+            let t0 = Instant::now();
+            let view = render_view(&camera, &lidar_t_camera, &core, &overlay, t_ns, link_state(&link), &render_cfg);
+            let render_ms = t0.elapsed().as_secs_f64() * 1e3;
+            if let Some(w) = &watch {
+                let _ = w.send(FpvEvent::Frame { index, t_ns, view: Box::new(view), render_ms });
             }
         }
     }

@@ -120,11 +120,20 @@ impl Grid {
                 }
             }
         }
-        let mut groups: HashMap<u32, Vec<u32>> = HashMap::new();
+        // Groups indexed by their root (a vector, not a hash map: this runs for every cluster).
+        let mut group_of = vec![u32::MAX; subset.len()];
+        let mut out: Vec<Vec<u32>> = Vec::new();
         for (i, &v) in subset.iter().enumerate() {
-            groups.entry(find(&mut parent, i as u32)).or_default().push(v);
+            let root = find(&mut parent, i as u32) as usize;
+            let Some(slot) = group_of.get_mut(root) else { continue };
+            if *slot == u32::MAX {
+                *slot = out.len() as u32;
+                out.push(Vec::new());
+            }
+            if let Some(g) = out.get_mut(*slot as usize) {
+                g.push(v);
+            }
         }
-        let mut out: Vec<Vec<u32>> = groups.into_values().collect();
         // Deterministic order (HashMap iteration is not).
         out.sort_unstable_by_key(|g| g.first().copied().unwrap_or(0));
         out

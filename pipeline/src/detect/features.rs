@@ -103,10 +103,12 @@ pub fn features(
             .count();
         on as f64 - (a1 - a0) * (b1 - b0)
     };
-    let coarse = (0..30).map(|k| f64::from(k).to_radians() * 3.0);
-    let best = coarse.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(0.0);
-    let fine = (-6..=6).map(|k| best + f64::from(k).to_radians() * 0.5);
-    let edge_yaw = fine.max_by(|a, b| support(*a).total_cmp(&support(*b))).unwrap_or(best);
+    // Each heading's support once (a comparator calling it twice per pair costs double).
+    let best_of = |yaws: &mut dyn Iterator<Item = f64>, default: f64| {
+        yaws.map(|yaw| (yaw, support(yaw))).max_by(|a, b| a.1.total_cmp(&b.1)).map_or(default, |(yaw, _)| yaw)
+    };
+    let best = best_of(&mut (0..30).map(|k| f64::from(k).to_radians() * 3.0), 0.0);
+    let edge_yaw = best_of(&mut (-6..=6).map(|k| best + f64::from(k).to_radians() * 0.5), best);
     // The box: in the frame of the edges, or of the footprint's major axis when that is
     // elongated (a body lying, a walker mid-stride: the edges of a rounded outline do not give
     // a heading reliably) and the smaller footprint.

@@ -1,11 +1,15 @@
 //! What the rig draws: the people of the robot's recent detections, each at its latest
-//! sighting, held for a while after the robot last saw them, with their age.
+//! sighting, held for a while after the robot last saw them, with their age. A person is drawn
+//! once confirmed: seen in two detection windows within `CONFIRM_NS` of each other (a single
+//! window's false positive, held for a second, would otherwise stand on screen where no one is).
 
 use crate::ar::ArPerson;
 use std::collections::VecDeque;
 
 /// A later sighting this close (m, in the floor plane) to an earlier one is the same person.
 const SAME_PERSON_M: f64 = 0.7;
+/// Two sightings of one person at most this far apart confirm them.
+const CONFIRM_NS: u64 = 500_000_000;
 
 struct Shown {
     stamp_ns: u64,
@@ -46,12 +50,23 @@ impl Overlay {
                 let Some(b) = p.bbox else { continue };
                 let seen =
                     out.iter().any(|q| q.bbox.is_some_and(|c| (c.centre_m - b.centre_m).xy().norm() < SAME_PERSON_M));
-                if !seen {
+                if !seen && self.confirmed(s.stamp_ns, &b.centre_m) {
                     out.push(ArPerson { age_ns: t_ns - s.stamp_ns, ..p.clone() });
                 }
             }
         }
         out
+    }
+}
+
+impl Overlay {
+    /// Whether someone was also seen near `centre` in an earlier window at most `CONFIRM_NS`
+    /// before `stamp_ns`.
+    fn confirmed(&self, stamp_ns: u64, centre: &nalgebra::Vector3<f64>) -> bool {
+        self.shown
+            .iter()
+            .filter(|s| s.stamp_ns < stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
+            .any(|s| s.people.iter().filter_map(|p| p.bbox).any(|b| (b.centre_m - centre).xy().norm() < SAME_PERSON_M))
     }
 }
 
@@ -77,13 +92,26 @@ mod tests {
     fn latest_sighting_wins_and_expires() {
         let mut o = Overlay::new(1_000);
         o.push(100, vec![person(0.0), person(5.0)]);
+        o.push(200, vec![person(0.1), person(5.1)]);
         o.push(300, vec![person(0.2)]);
         let now = o.at(400);
         assert_eq!(now.len(), 2);
         let near = now.iter().find(|p| p.bbox.is_some_and(|b| b.centre_m.x < 1.0)).map(|p| p.age_ns);
         assert_eq!(near, Some(100));
         assert!(o.at(50).is_empty(), "nothing before the first detection");
-        assert_eq!(o.at(1_250).len(), 1, "the person last seen at 100 expired");
+        assert_eq!(o.at(1_250).len(), 1, "the person last seen at 200 expired");
+    }
+
+    #[test]
+    fn one_window_alone_is_not_drawn() {
+        let mut o = Overlay::new(2_000_000_000);
+        o.push(0, vec![person(0.0)]);
+        assert!(o.at(100_000_000).is_empty(), "seen once: unconfirmed");
+        // Seen again long after: still a single sighting within the confirmation window.
+        o.push(1_000_000_000, vec![person(0.1)]);
+        assert!(o.at(1_000_000_000).is_empty());
+        o.push(1_100_000_000, vec![person(0.2)]);
+        assert_eq!(o.at(1_100_000_000).len(), 1, "confirmed by the window before");
     }
 
     #[test]
@@ -91,6 +119,7 @@ mod tests {
         let mut o = Overlay::new(1_000);
         o.push(300, vec![person(0.0)]);
         o.push(200, vec![person(0.1)]);
+        o.push(100, vec![person(0.1)]);
         assert_eq!(o.newest_ns(), Some(300));
         assert_eq!(o.at(350).first().map(|p| p.age_ns), Some(50));
     }

@@ -8,6 +8,10 @@ use std::collections::VecDeque;
 
 /// Points closer than this (squared, m²) are the rig or the robot itself.
 const MIN_RANGE_SQ_M2: f32 = 0.25;
+/// Poses interpolated per scan; each point takes the nearest. A slerp per point cost a quarter
+/// of the whole mission's time; at 10 Hz this is a pose every 0.8 ms (under 2 mm at 10 m while
+/// turning 30 deg/s).
+const POSE_STEPS: usize = 128;
 
 #[derive(Default)]
 pub struct ScanPlacer {
@@ -35,9 +39,12 @@ impl ScanPlacer {
         self.last = Some((o.end_ns, o.lidar_pose));
         let Some(raw) = self.pending.pop_front().filter(|s| s.end_ns == o.end_ns) else { return Vec::new() };
         let span = raw.end_ns.saturating_sub(raw.start_ns).max(1) as f64;
+        let steps: Vec<Isometry3<f64>> =
+            (0..=POSE_STEPS).map(|k| prev.lerp_slerp(&o.lidar_pose, k as f64 / POSE_STEPS as f64)).collect();
         let pose_at = |t_ns: u64| {
-            let f = t_ns.saturating_sub(raw.start_ns) as f64 / span;
-            prev.lerp_slerp(&o.lidar_pose, f.clamp(0.0, 1.0))
+            let f = (t_ns.saturating_sub(raw.start_ns) as f64 / span).clamp(0.0, 1.0);
+            let k = (f * POSE_STEPS as f64).round() as usize;
+            steps.get(k).copied().unwrap_or(o.lidar_pose)
         };
         let sensor = raw
             .points

@@ -67,15 +67,18 @@ impl Default for RigCoreConfig {
     }
 }
 
-/// One registration of the rig's window against the robot's map, ready to run anywhere.
+/// One registration of the rig's window against the robot's map, ready to run anywhere: it
+/// holds what it needs (shared scans, a copy of the odometry), so building the window, the
+/// costly part besides the registration, runs wherever the job does.
 pub struct AlignJob {
     pub end_ns: u64,
     pub tracking: bool,
-    source: Vec<Vector3<f64>>,
+    window_ns: u64,
+    voxel_m: f64,
+    scans: Vec<Arc<LioScan>>,
+    odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
     config: AlignConfig,
-    /// The window's frame (gravity-aligned at the rig) in the rig's odometry frame.
-    frame: Isometry3<f64>,
     lidar_pose: Isometry3<f64>,
     guess_world_t_lidar: Isometry3<f64>,
 }
@@ -91,10 +94,15 @@ pub struct AlignOutcome {
 
 impl AlignJob {
     pub fn run(self) -> Result<AlignOutcome, PipelineError> {
+        // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
+        // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
+        // off and accepted it; reduced alike, it refuses.)
+        let (raw, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
+        let source = voxel_downsample(&raw, self.voxel_m);
         let aligner = Aligner::new(&self.target, self.config)?;
-        let report = aligner.align(&self.source, &(self.guess_world_t_lidar * self.lidar_pose.inverse() * self.frame));
+        let report = aligner.align(&source, &(self.guess_world_t_lidar * self.lidar_pose.inverse() * frame));
         // The registered frame back to the rig's LiDAR pose in the world.
-        let world_t_lidar = report.pose * self.frame.inverse() * self.lidar_pose;
+        let world_t_lidar = report.pose * frame.inverse() * self.lidar_pose;
         Ok(AlignOutcome { end_ns: self.end_ns, tracking: self.tracking, report, world_t_lidar })
     }
 }
@@ -121,7 +129,7 @@ pub struct RigCore {
     outs: Vec<ScanOutput>,
     world: WorldPose,
     odom: PoseBuffer,
-    scans: VecDeque<LioScan>,
+    scans: VecDeque<Arc<LioScan>>,
     points: Vec<Vector3<f64>>,
     first_ns: Option<u64>,
     next_align_ns: u64,
@@ -185,7 +193,7 @@ impl RigCore {
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<ScanOutput>) {
         self.placer.pending(scan.clone());
-        self.scans.push_back(scan.clone());
+        self.scans.push_back(Arc::new(scan.clone()));
         self.lio.push_scan(scan, &mut self.outs);
         self.drain(out);
     }
@@ -247,11 +255,8 @@ impl RigCore {
         let aligned = self.aligned();
         let wait_ns = if aligned { self.cfg.track_window_ns } else { self.cfg.first_window_ns };
         let window_ns = if aligned { wait_ns } else { (end_ns - first).min(self.cfg.max_first_window_ns) };
-        // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
-        // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
-        // off and accepted it; reduced alike, it refuses.)
-        let (raw, frame) = self.window(end_ns, window_ns);
-        let source = voxel_downsample(&raw, self.cfg.voxel_m);
+        let from = end_ns.saturating_sub(window_ns);
+        let scans = self.scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns).cloned().collect();
         // Without a world pose the responder is taken to start near the expected start; the yaw
         // grid does the rest.
         let guess = self.world.world_pose(end_ns).ok().flatten().unwrap_or(self.start_hint);
@@ -261,10 +266,12 @@ impl RigCore {
         Some(AlignJob {
             end_ns,
             tracking: aligned,
-            source,
+            window_ns,
+            voxel_m: self.cfg.voxel_m,
+            scans,
+            odom: self.odom.clone(),
             target: Arc::clone(&self.map),
             config: if aligned { self.cfg.track.clone() } else { self.cfg.align.clone() },
-            frame,
             lidar_pose,
             guess_world_t_lidar: guess,
         })
@@ -292,23 +299,30 @@ impl RigCore {
         self.accepted += 1;
         AlignVerdict::Accepted { first }
     }
+}
 
-    fn window(&self, end_ns: u64, window_ns: u64) -> (Vec<Vector3<f64>>, Isometry3<f64>) {
-        let Ok(at_end) = self.odom.at(end_ns) else { return (Vec::new(), Isometry3::identity()) };
-        let frame = Isometry3::from_parts(at_end.translation, UnitQuaternion::identity());
-        let inv = frame.inverse();
-        let from = end_ns.saturating_sub(window_ns);
-        let mut out = Vec::new();
-        for s in self.scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns) {
-            for p in s.points.iter().filter(|p| p.t_ns >= from && p.t_ns <= end_ns) {
-                if p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m <= 0.25 {
-                    continue;
-                }
-                let Ok(pose) = self.odom.at(p.t_ns) else { continue };
-                let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-                out.push(q.coords);
+/// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
+/// the odometry's (gravity-aligned) axes; the points and that frame (in odometry).
+fn window(
+    scans: &[Arc<LioScan>],
+    odom: &PoseBuffer,
+    end_ns: u64,
+    window_ns: u64,
+) -> (Vec<Vector3<f64>>, Isometry3<f64>) {
+    let Ok(at_end) = odom.at(end_ns) else { return (Vec::new(), Isometry3::identity()) };
+    let frame = Isometry3::from_parts(at_end.translation, UnitQuaternion::identity());
+    let inv = frame.inverse();
+    let from = end_ns.saturating_sub(window_ns);
+    let mut out = Vec::new();
+    for s in scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns) {
+        for p in s.points.iter().filter(|p| p.t_ns >= from && p.t_ns <= end_ns) {
+            if p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m <= 0.25 {
+                continue;
             }
+            let Ok(pose) = odom.at(p.t_ns) else { continue };
+            let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
+            out.push(q.coords);
         }
-        (out, frame)
     }
+    (out, frame)
 }
