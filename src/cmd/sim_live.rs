@@ -222,12 +222,15 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
                     }
                     let _ = t_ns;
                 }
-                FpvEvent::Shown { slam_ns, comm_ns, viz_ns, .. } => {
-                    let ms = |ns: i64| ns as f64 * 1e-6;
-                    slam.push(ms(slam_ns));
-                    comm.push(ms(comm_ns));
-                    viz.push(ms(viz_ns));
-                    total.push(ms(slam_ns + comm_ns + viz_ns));
+                // L_SLAM and L_comm of every detection with people; L_viz and the total of those
+                // drawn (the rig aligned).
+                FpvEvent::Received { slam_ns, comm_ns } => {
+                    slam.push(slam_ns as f64 * 1e-6);
+                    comm.push(comm_ns as f64 * 1e-6);
+                }
+                FpvEvent::Shown { slam_ns, comm_ns, viz_ns } => {
+                    viz.push(viz_ns as f64 * 1e-6);
+                    total.push((slam_ns + comm_ns + viz_ns) as f64 * 1e-6);
                 }
             }
         }

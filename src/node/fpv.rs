@@ -48,6 +48,12 @@ pub enum FpvEvent {
         view: Box<View>,
         render_ms: f64,
     },
+    /// A detection with people received: its time on the robot (last packet of its scan to
+    /// sent) and on the link.
+    Received {
+        slam_ns: i64,
+        comm_ns: i64,
+    },
     /// A detection first drawn: the robot's host times (last packet of its scan, sent), and ours
     /// (received, first frame showing it rendered); `comm_ns` is the link's transport time.
     Shown {
@@ -154,6 +160,9 @@ pub async fn run(
                         };
                         let comm_ns = got.latency_ns.or(got.raw_latency_ns).unwrap_or(0);
                         let slam_ns = sent_host_ns as i64 - scan_last_packet_host_ns as i64;
+                        if let (Some(w), false) = (&watch, people.is_empty()) {
+                            let _ = w.send(FpvEvent::Received { slam_ns, comm_ns });
+                        }
                         // Only what can be drawn now counts: people, and the rig placed in the map.
                         if !people.is_empty() && core.aligned() {
                             waiting.push(Waiting { stamp_ns: stamp_here, slam_ns, comm_ns, recv_host_ns: got.recv_host_ns });
