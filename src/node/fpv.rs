@@ -6,16 +6,14 @@
 
 use super::config::{lio_config, render_config, FpvNodeConfig};
 use super::recording::NodeRecorder;
-use super::{wait_stop, Stop};
-use crate::cmd::export::scan_to_cloud;
+use super::{imu_sample, wait_stop, Stop};
 use crate::cmd::lio_input::lio_scan;
 use crate::view::{start_views, ViewHub, ViewStatus};
 use anyhow::Context;
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::{LivoxDriver, LivoxEvent};
 use starc_pipeline::align::TileMap;
-use starc_pipeline::lio::ImuSample;
 use starc_pipeline::mission::{render_view, AlignOutcome, AlignVerdict, Overlay, RigCore, RigCoreConfig, View};
 use starc_pipeline::record::msgs::{CompressedImage, Header, Time};
 use starc_pipeline::record::Topic;
@@ -186,7 +184,7 @@ pub async fn run(
                             host_minus_lidar_ns = Some(h.ns as i64 - ls.end_ns as i64);
                         }
                         if let Some(r) = recorder.as_mut() {
-                            r.points(&scan_to_cloud(&scan));
+                            r.scan(&scan);
                         }
                         summary.scans += 1;
                         core.push_scan(ls, &mut outs);
@@ -195,11 +193,7 @@ pub async fn run(
                         if *ours.get_or_insert(r.ip) != r.ip {
                             continue;
                         }
-                        let s = ImuSample {
-                            t_ns: r.device_time.ns,
-                            gyro_rad_s: Vector3::from(r.sample.gyro_rad_s.map(f64::from)),
-                            acc_m_s2: Vector3::from(r.sample.acc_m_s2().map(f64::from)),
-                        };
+                        let s = imu_sample(&r);
                         if let Some(rec) = recorder.as_mut() {
                             rec.imu(&s);
                         }

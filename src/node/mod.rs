@@ -7,7 +7,19 @@ pub mod fpv;
 mod recording;
 pub mod robot;
 
+use nalgebra::Vector3;
+use starc_livox::live::ImuReading;
+use starc_pipeline::lio::ImuSample;
 use tokio::sync::watch;
+
+/// An Avia IMU reading as the LIO takes it (on the LiDAR's clock, acceleration in m/s²).
+pub fn imu_sample(r: &ImuReading) -> ImuSample {
+    ImuSample {
+        t_ns: r.device_time.ns,
+        gyro_rad_s: Vector3::from(r.sample.gyro_rad_s.map(f64::from)),
+        acc_m_s2: Vector3::from(r.sample.acc_m_s2().map(f64::from)),
+    }
+}
 
 /// Stops a node: send `true` (or drop the sender).
 pub type Stop = watch::Receiver<bool>;

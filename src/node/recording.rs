@@ -44,6 +44,11 @@ impl NodeRecorder {
         }
     }
 
+    /// A scan from the live driver, with every point's firing time.
+    pub fn scan(&mut self, scan: &starc_livox::scan::Scan) {
+        self.points(&crate::cmd::export::scan_to_cloud(scan));
+    }
+
     pub fn points(&mut self, cloud: &PointCloud) {
         let topic = format!("/{}/points", self.device);
         self.put("points", |r| r.point_cloud_on(&topic, cloud));

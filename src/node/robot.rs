@@ -4,14 +4,11 @@
 
 use super::config::{lio_config, RobotNodeConfig};
 use super::recording::NodeRecorder;
-use super::{wait_stop, Stop};
-use crate::cmd::export::scan_to_cloud;
+use super::{imu_sample, wait_stop, Stop};
 use crate::cmd::lio_input::lio_scan;
 use anyhow::Context;
-use nalgebra::Vector3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, Role};
 use starc_livox::live::{LivoxDriver, LivoxEvent};
-use starc_pipeline::lio::ImuSample;
 use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
 use std::collections::VecDeque;
 use std::net::Ipv4Addr;
@@ -74,7 +71,7 @@ pub async fn run(
                             scan_hosts.pop_front();
                         }
                         if let Some(r) = recorder.as_mut() {
-                            r.points(&scan_to_cloud(&scan));
+                            r.scan(&scan);
                         }
                         summary.scans += 1;
                         core.push_scan(ls, &mut steps);
@@ -83,11 +80,7 @@ pub async fn run(
                         if *ours.get_or_insert(r.ip) != r.ip {
                             continue;
                         }
-                        let s = ImuSample {
-                            t_ns: r.device_time.ns,
-                            gyro_rad_s: Vector3::from(r.sample.gyro_rad_s.map(f64::from)),
-                            acc_m_s2: Vector3::from(r.sample.acc_m_s2().map(f64::from)),
-                        };
+                        let s = imu_sample(&r);
                         if let Some(rec) = recorder.as_mut() {
                             rec.imu(&s);
                         }
