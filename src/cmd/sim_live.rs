@@ -22,7 +22,6 @@ use starc_pipeline::mission::AlignVerdict;
 use std::io::Write as _;
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc as std_mpsc;
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
 
@@ -44,13 +43,8 @@ pub struct LiveOptions {
     pub view: crate::view::ViewConfig,
 }
 
-fn free_port() -> anyhow::Result<u16> {
-    let s = std::net::TcpListener::bind("127.0.0.1:0")?;
-    let u = std::net::UdpSocket::bind(("127.0.0.1", s.local_addr()?.port()));
-    match u {
-        Ok(u) => Ok(u.local_addr()?.port()),
-        Err(_) => free_port_udp(),
-    }
+fn free_port_tcp() -> anyhow::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
 }
 
 fn free_port_udp() -> anyhow::Result<u16> {
@@ -93,9 +87,10 @@ fn link(listen: Option<u16>, connect: Option<u16>) -> anyhow::Result<LinkConfig>
 }
 
 /// Runs the nodes on their own thread and runtime.
-fn spawn_node<F, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<T>>>
+fn spawn_node<F, Fut, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<T>>>
 where
-    F: FnOnce() -> std::pin::Pin<Box<dyn std::future::Future<Output = anyhow::Result<T>>>> + Send + 'static,
+    F: FnOnce() -> Fut + Send + 'static,
+    Fut: std::future::Future<Output = anyhow::Result<T>>,
     T: Send + 'static,
 {
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
@@ -124,7 +119,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (_, _, hint_yaw) = hint.rotation.euler_angles();
     let t = hint.translation.vector;
 
-    let (robot_bcast, fpv_bcast, link_port) = (free_port_udp()?, free_port_udp()?, free_port()?);
+    let (robot_bcast, fpv_bcast, link_port) = (free_port_udp()?, free_port_udp()?, free_port_tcp()?);
     let robot_cfg = RobotNodeConfig {
         livox: driver(robot_bcast)?,
         lidar_ip: Some(ROBOT_MOCK),
@@ -175,9 +170,9 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (robot_tx, mut robot_rx) = mpsc::unbounded_channel();
     let (fpv_tx, mut fpv_rx) = mpsc::unbounded_channel();
     let robot_stop = stop_rx.clone();
-    let robot = spawn_node("robot-node", move || Box::pin(robot::run(robot_cfg, robot_stop, Some(robot_tx))))?;
+    let robot = spawn_node("robot-node", move || robot::run(robot_cfg, robot_stop, Some(robot_tx)))?;
     let fpv_stop = stop_rx.clone();
-    let fpv = spawn_node("fpv-node", move || Box::pin(fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx))))?;
+    let fpv = spawn_node("fpv-node", move || fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx)))?;
 
     let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
     let total_s = deadline.saturating_duration_since(Instant::now()).as_secs_f64();
@@ -186,7 +181,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (mut detections, mut frames) = (0u64, 0u64);
     let mut detect_ms = Vec::new();
     let png_dir = opts.out.join("ar");
-    let (err_tx, err_rx) = std_mpsc::channel::<anyhow::Error>();
+    let mut scoring_error: Option<anyhow::Error> = None;
     let mut last_progress = Instant::now();
     loop {
         let now = Instant::now();
@@ -217,10 +212,9 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
                         let keep = (opts.frames_every > 0 && index.is_multiple_of(opts.frames_every))
                             .then_some(png_dir.as_path());
                         if let Err(e) = score.frame(&f, &view, render_ms, keep) {
-                            let _ = err_tx.send(e);
+                            scoring_error.get_or_insert(e);
                         }
                     }
-                    let _ = t_ns;
                 }
                 // L_SLAM and L_comm of every detection with people; L_viz and the total of those
                 // drawn (the rig aligned).
@@ -255,7 +249,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     }
     let robot_summary = robot_summary.context("robot node")?;
     let fpv_summary = fpv_summary.context("rig node")?;
-    if let Ok(e) = err_rx.try_recv() {
+    if let Some(e) = scoring_error {
         return Err(e);
     }
     if robot_tum.is_empty() || fpv_summary.scans == 0 {

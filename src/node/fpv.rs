@@ -6,19 +6,17 @@
 
 use super::config::{lio_config, render_config, FpvNodeConfig};
 use super::recording::NodeRecorder;
-use super::{imu_sample, wait_stop, Stop};
-use crate::cmd::lio_input::lio_scan;
+use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::view::{start_views, ViewHub, ViewStatus};
 use anyhow::Context;
 use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
-use starc_livox::live::{LivoxDriver, LivoxEvent};
+use starc_livox::live::LivoxDriver;
 use starc_pipeline::align::TileMap;
 use starc_pipeline::mission::{render_view, AlignOutcome, AlignVerdict, Overlay, RigCore, RigCoreConfig, View};
 use starc_pipeline::record::msgs::{CompressedImage, Header, Time};
 use starc_pipeline::record::Topic;
 use starc_pipeline::PipelineError;
-use std::net::Ipv4Addr;
 use std::time::Instant;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
@@ -111,7 +109,7 @@ pub async fn run(
     let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
     tracing::info!(host = ?driver.host, "rig node up");
 
-    let mut ours: Option<Ipv4Addr> = cfg.lidar_ip;
+    let mut feed = LidarFeed::new(cfg.lidar_ip, "rig");
     let mut job: Option<Job> = None;
     let mut outs = Vec::new();
     let mut waiting: Vec<Waiting> = Vec::new();
@@ -174,34 +172,16 @@ pub async fn run(
             }
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
-                match ev {
-                    LivoxEvent::Scan { ip, scan } => {
-                        if *ours.get_or_insert(ip) != ip {
-                            continue;
-                        }
-                        let ls = lio_scan(&scan);
-                        if let Some(h) = scan.last_host_receive {
-                            host_minus_lidar_ns = Some(h.ns as i64 - ls.end_ns as i64);
-                        }
-                        if let Some(r) = recorder.as_mut() {
-                            r.scan(&scan);
+                match feed.take(ev, recorder.as_mut()) {
+                    Some(Fed::Scan { scan, last_host_ns }) => {
+                        if let Some(h) = last_host_ns {
+                            host_minus_lidar_ns = Some(h as i64 - scan.end_ns as i64);
                         }
                         summary.scans += 1;
-                        core.push_scan(ls, &mut outs);
+                        core.push_scan(scan, &mut outs);
                     }
-                    LivoxEvent::Imu(r) => {
-                        if *ours.get_or_insert(r.ip) != r.ip {
-                            continue;
-                        }
-                        let s = imu_sample(&r);
-                        if let Some(rec) = recorder.as_mut() {
-                            rec.imu(&s);
-                        }
-                        core.push_imu(s, &mut outs);
-                    }
-                    LivoxEvent::Connected { ip, .. } => tracing::info!(%ip, "rig lidar connected"),
-                    LivoxEvent::Lost { ip } => tracing::warn!(%ip, "rig lidar lost"),
-                    _ => {}
+                    Some(Fed::Imu(s)) => core.push_imu(s, &mut outs),
+                    None => {}
                 }
                 for o in outs.drain(..) {
                     render_live = true;
@@ -233,7 +213,8 @@ pub async fn run(
             if schedule.is_empty() {
                 core.world_mut().step_frame();
             }
-            let view = render_view(&camera, &lidar_t_camera, &core, &overlay, t_ns, link_state(&link), &render_cfg);
+            let link_now = link_state(&link);
+            let view = render_view(&camera, &lidar_t_camera, &core, &overlay, t_ns, link_now, &render_cfg);
             let rendered = host_now_ns();
             summary.frames += 1;
             if view.aligned {
@@ -252,7 +233,7 @@ pub async fn run(
             let status = ViewStatus {
                 aligned: view.aligned,
                 detection_age_ms: view.detection_age_ms,
-                link: link_state(&link).to_string(),
+                link: link_now.to_string(),
                 people: view.people.len(),
                 frame_seq: summary.frames,
                 stamp_ns: t_ns,

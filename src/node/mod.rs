@@ -4,13 +4,67 @@
 
 pub mod config;
 pub mod fpv;
-mod recording;
+pub mod recording;
 pub mod robot;
 
+use crate::cmd::lio_input::lio_scan;
 use nalgebra::Vector3;
-use starc_livox::live::ImuReading;
-use starc_pipeline::lio::ImuSample;
+use recording::NodeRecorder;
+use starc_livox::live::{ImuReading, LivoxEvent};
+use starc_pipeline::lio::{ImuSample, LioScan};
+use std::net::Ipv4Addr;
 use tokio::sync::watch;
+
+/// What a node takes from its LiDAR.
+pub enum Fed {
+    /// A scan, with the host time its last packet arrived.
+    Scan {
+        scan: LioScan,
+        last_host_ns: Option<u64>,
+    },
+    Imu(ImuSample),
+}
+
+/// The node's own LiDAR among the driver's events: the configured one, or the first that sends
+/// data. Its scans and IMU samples are recorded and converted for the LIO; connects and losses
+/// are logged.
+pub struct LidarFeed {
+    ours: Option<Ipv4Addr>,
+    name: &'static str,
+}
+
+impl LidarFeed {
+    pub fn new(ours: Option<Ipv4Addr>, name: &'static str) -> Self {
+        Self { ours, name }
+    }
+
+    pub fn take(&mut self, ev: LivoxEvent, recorder: Option<&mut NodeRecorder>) -> Option<Fed> {
+        match ev {
+            LivoxEvent::Scan { ip, scan } if *self.ours.get_or_insert(ip) == ip => {
+                if let Some(r) = recorder {
+                    r.scan(&scan);
+                }
+                Some(Fed::Scan { scan: lio_scan(&scan), last_host_ns: scan.last_host_receive.map(|s| s.ns) })
+            }
+            LivoxEvent::Imu(r) if *self.ours.get_or_insert(r.ip) == r.ip => {
+                let s = imu_sample(&r);
+                if let Some(rec) = recorder {
+                    rec.imu(&s);
+                }
+                Some(Fed::Imu(s))
+            }
+            LivoxEvent::Connected { ip, .. } => {
+                tracing::info!(%ip, "{} lidar connected", self.name);
+                None
+            }
+            LivoxEvent::Lost { ip } => {
+                tracing::warn!(%ip, "{} lidar lost", self.name);
+                None
+            }
+            _ => None,
+        }
+    }
+}
 
 /// An Avia IMU reading as the LIO takes it (on the LiDAR's clock, acceleration in m/s²).
 pub fn imu_sample(r: &ImuReading) -> ImuSample {

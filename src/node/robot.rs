@@ -4,14 +4,12 @@
 
 use super::config::{lio_config, RobotNodeConfig};
 use super::recording::NodeRecorder;
-use super::{imu_sample, wait_stop, Stop};
-use crate::cmd::lio_input::lio_scan;
+use super::{wait_stop, Fed, LidarFeed, Stop};
 use anyhow::Context;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, Role};
-use starc_livox::live::{LivoxDriver, LivoxEvent};
+use starc_livox::live::LivoxDriver;
 use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
 use std::collections::VecDeque;
-use std::net::Ipv4Addr;
 use std::time::Duration;
 use tokio::sync::mpsc;
 
@@ -43,7 +41,7 @@ pub async fn run(
     let link = LinkNode::open(&cfg.link, Role::Robot).await.context("opening the link")?;
     let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
     tracing::info!(host = ?driver.host, "robot node up");
-    let mut ours: Option<Ipv4Addr> = cfg.lidar_ip;
+    let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
     let mut map_tick = tokio::time::interval(Duration::from_millis(cfg.map_period_ms.max(10)));
     let mut scan_hosts: VecDeque<(u64, u64)> = VecDeque::new();
     let mut steps: Vec<RobotStep> = Vec::new();
@@ -60,36 +58,20 @@ pub async fn run(
             }
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
-                match ev {
-                    LivoxEvent::Scan { ip, scan } => {
-                        if *ours.get_or_insert(ip) != ip {
-                            continue;
-                        }
-                        let ls = lio_scan(&scan);
-                        scan_hosts.push_back((ls.end_ns, scan.last_host_receive.map_or_else(host_now_ns, |s| s.ns)));
+                match feed.take(ev, recorder.as_mut()) {
+                    Some(Fed::Scan { scan, last_host_ns }) => {
+                        scan_hosts.push_back((scan.end_ns, last_host_ns.unwrap_or_else(host_now_ns)));
                         if scan_hosts.len() > 64 {
                             scan_hosts.pop_front();
                         }
-                        if let Some(r) = recorder.as_mut() {
-                            r.scan(&scan);
-                        }
                         summary.scans += 1;
-                        core.push_scan(ls, &mut steps);
+                        core.push_scan(scan, &mut steps);
                     }
-                    LivoxEvent::Imu(r) => {
-                        if *ours.get_or_insert(r.ip) != r.ip {
-                            continue;
-                        }
-                        let s = imu_sample(&r);
-                        if let Some(rec) = recorder.as_mut() {
-                            rec.imu(&s);
-                        }
+                    Some(Fed::Imu(s)) => {
                         summary.imu_samples += 1;
                         core.push_imu(s, &mut steps);
                     }
-                    LivoxEvent::Connected { ip, .. } => tracing::info!(%ip, "robot lidar connected"),
-                    LivoxEvent::Lost { ip } => tracing::warn!(%ip, "robot lidar lost"),
-                    _ => {}
+                    None => {}
                 }
                 for step in steps.drain(..) {
                     let o = &step.output;

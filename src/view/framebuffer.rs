@@ -233,37 +233,8 @@ pub fn convert(frame: &ArFrame, g: &FbGeometry, format: PixelFormat, out: &mut V
 }
 
 /// Writes frames from `frames` to `fb` until shutdown (blocking writes off the async threads).
-pub fn follow(fb: Framebuffer, mut frames: SnapshotReceiver, mut shutdown: Shutdown) -> JoinHandle<()> {
-    tokio::spawn(async move {
-        let mut fb = Some(fb);
-        let mut failing = false;
-        loop {
-            tokio::select! {
-                _ = super::wait_shutdown(&mut shutdown) => return,
-                changed = frames.changed() => if changed.is_err() { return },
-            }
-            let Some(snapshot) = frames.borrow_and_update().clone() else { continue };
-            let Some(mut f) = fb.take() else { return };
-            let Ok((f, result)) = tokio::task::spawn_blocking(move || {
-                let r = f.write_frame(&snapshot.frame);
-                (f, r)
-            })
-            .await
-            else {
-                return;
-            };
-            fb = Some(f);
-            // One warning per run of failures, not one per frame.
-            match result {
-                Err(e) if !failing => {
-                    tracing::warn!("{e}");
-                    failing = true;
-                }
-                Ok(()) => failing = false,
-                Err(_) => {}
-            }
-        }
-    })
+pub fn follow(fb: Framebuffer, frames: SnapshotReceiver, shutdown: Shutdown) -> JoinHandle<()> {
+    super::hub::follow_blocking("framebuffer", fb, |fb, s| fb.write_frame(&s.frame), frames, shutdown)
 }
 
 #[cfg(test)]

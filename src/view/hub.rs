@@ -107,3 +107,48 @@ pub fn check_frame(frame: &ArFrame) -> Result<(), ViewError> {
         }),
     }
 }
+
+/// Hands each new snapshot to a blocking sink (a display device, a disk) off the async threads
+/// until shutdown; frames that arrive while it writes are skipped. One warning per run of
+/// failures, not one per frame (a full disk would otherwise log at frame rate).
+pub fn follow_blocking<S, W>(
+    what: &'static str,
+    sink: S,
+    write: W,
+    mut frames: SnapshotReceiver,
+    mut shutdown: super::Shutdown,
+) -> tokio::task::JoinHandle<()>
+where
+    S: Send + 'static,
+    W: Fn(&mut S, &ViewSnapshot) -> Result<(), ViewError> + Copy + Send + 'static,
+{
+    tokio::spawn(async move {
+        let mut sink = Some(sink);
+        let mut failing = false;
+        loop {
+            tokio::select! {
+                _ = super::wait_shutdown(&mut shutdown) => return,
+                changed = frames.changed() => if changed.is_err() { return },
+            }
+            let Some(snapshot) = frames.borrow_and_update().clone() else { continue };
+            let Some(mut s) = sink.take() else { return };
+            let Ok((s, result)) = tokio::task::spawn_blocking(move || {
+                let r = write(&mut s, &snapshot);
+                (s, r)
+            })
+            .await
+            else {
+                return;
+            };
+            sink = Some(s);
+            match result {
+                Err(e) if !failing => {
+                    tracing::warn!("{what}: {e}");
+                    failing = true;
+                }
+                Ok(()) => failing = false,
+                Err(_) => {}
+            }
+        }
+    })
+}

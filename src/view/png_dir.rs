@@ -44,35 +44,6 @@ impl PngDir {
 }
 
 /// Writes frames from `frames` until shutdown (blocking file I/O off the async threads).
-pub fn follow(writer: PngDir, mut frames: SnapshotReceiver, mut shutdown: Shutdown) -> JoinHandle<()> {
-    tokio::spawn(async move {
-        let mut writer = Some(writer);
-        let mut failing = false;
-        loop {
-            tokio::select! {
-                _ = super::wait_shutdown(&mut shutdown) => return,
-                changed = frames.changed() => if changed.is_err() { return },
-            }
-            let Some(snapshot) = frames.borrow_and_update().clone() else { continue };
-            let Some(mut w) = writer.take() else { return };
-            let Ok((w, result)) = tokio::task::spawn_blocking(move || {
-                let r = w.write(&snapshot);
-                (w, r)
-            })
-            .await
-            else {
-                return;
-            };
-            writer = Some(w);
-            // One warning per run of failures (a full disk would otherwise log at frame rate).
-            match result {
-                Err(e) if !failing => {
-                    tracing::warn!("PNG frames: {e}");
-                    failing = true;
-                }
-                Ok(_) => failing = false,
-                Err(_) => {}
-            }
-        }
-    })
+pub fn follow(writer: PngDir, frames: SnapshotReceiver, shutdown: Shutdown) -> JoinHandle<()> {
+    super::hub::follow_blocking("PNG frames", writer, |w, s| w.write(s).map(|_| ()), frames, shutdown)
 }

@@ -5,23 +5,49 @@ use crate::detect::{to_world, WindowPoint};
 use crate::lio::{LioScan, ScanOutput};
 use nalgebra::Isometry3;
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 /// Points closer than this (squared, m²) are the rig or the robot itself.
 const MIN_RANGE_SQ_M2: f32 = 0.25;
-/// Poses interpolated per scan; each point takes the nearest. A slerp per point cost a quarter
-/// of the whole mission's time; at 10 Hz this is a pose every 0.8 ms (under 2 mm at 10 m while
-/// turning 30 deg/s).
+/// Poses interpolated per scan; each point takes the nearest. A slerp per point took about an
+/// eighth of the offline mission's CPU time (perf); at 10 Hz this is a pose every 0.8 ms (under
+/// 2 mm at 10 m while turning 30 deg/s).
 const POSE_STEPS: usize = 128;
+
+/// Poses over one scan at `POSE_STEPS` even steps; a point takes the pose of the step nearest
+/// its firing time.
+pub struct ScanPoses {
+    start_ns: u64,
+    span_ns: f64,
+    steps: Vec<Option<Isometry3<f64>>>,
+}
+
+impl ScanPoses {
+    /// `pose_at(t)` sampled over `[start_ns, end_ns]` (None where it has no pose).
+    pub fn new(start_ns: u64, end_ns: u64, pose_at: impl Fn(u64) -> Option<Isometry3<f64>>) -> Self {
+        let span_ns = end_ns.saturating_sub(start_ns).max(1) as f64;
+        let steps = (0..=POSE_STEPS)
+            .map(|k| pose_at(start_ns + (span_ns * k as f64 / POSE_STEPS as f64).round() as u64))
+            .collect();
+        Self { start_ns, span_ns, steps }
+    }
+
+    /// The pose for a point fired at `t_ns` (clamped to the scan).
+    pub fn at(&self, t_ns: u64) -> Option<Isometry3<f64>> {
+        let f = (t_ns.saturating_sub(self.start_ns) as f64 / self.span_ns).clamp(0.0, 1.0);
+        self.steps.get((f * POSE_STEPS as f64).round() as usize).copied().flatten()
+    }
+}
 
 #[derive(Default)]
 pub struct ScanPlacer {
-    pending: VecDeque<LioScan>,
+    pending: VecDeque<Arc<LioScan>>,
     last: Option<(u64, Isometry3<f64>)>,
 }
 
 impl ScanPlacer {
     /// A raw scan handed to the LIO, kept until its output comes.
-    pub fn pending(&mut self, scan: LioScan) {
+    pub fn pending(&mut self, scan: Arc<LioScan>) {
         self.pending.push_back(scan);
     }
 
@@ -39,13 +65,10 @@ impl ScanPlacer {
         self.last = Some((o.end_ns, o.lidar_pose));
         let Some(raw) = self.pending.pop_front().filter(|s| s.end_ns == o.end_ns) else { return Vec::new() };
         let span = raw.end_ns.saturating_sub(raw.start_ns).max(1) as f64;
-        let steps: Vec<Isometry3<f64>> =
-            (0..=POSE_STEPS).map(|k| prev.lerp_slerp(&o.lidar_pose, k as f64 / POSE_STEPS as f64)).collect();
-        let pose_at = |t_ns: u64| {
-            let f = (t_ns.saturating_sub(raw.start_ns) as f64 / span).clamp(0.0, 1.0);
-            let k = (f * POSE_STEPS as f64).round() as usize;
-            steps.get(k).copied().unwrap_or(o.lidar_pose)
-        };
+        let poses = ScanPoses::new(raw.start_ns, raw.end_ns, |t| {
+            Some(prev.lerp_slerp(&o.lidar_pose, t.saturating_sub(raw.start_ns) as f64 / span))
+        });
+        let pose_at = |t_ns: u64| poses.at(t_ns).unwrap_or(o.lidar_pose);
         let sensor = raw
             .points
             .iter()

@@ -6,7 +6,7 @@
 //! the caller runs where it likes (inline offline, on a worker thread live) and hands back with
 //! [`RigCore::apply`].
 
-use super::place::ScanPlacer;
+use super::place::{ScanPlacer, ScanPoses};
 use crate::align::{voxel_downsample, AlignConfig, AlignReport, Aligner};
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
@@ -192,8 +192,9 @@ impl RigCore {
     }
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<ScanOutput>) {
-        self.placer.pending(scan.clone());
-        self.scans.push_back(Arc::new(scan.clone()));
+        let shared = Arc::new(scan.clone());
+        self.placer.pending(Arc::clone(&shared));
+        self.scans.push_back(shared);
         self.lio.push_scan(scan, &mut self.outs);
         self.drain(out);
     }
@@ -315,11 +316,12 @@ fn window(
     let from = end_ns.saturating_sub(window_ns);
     let mut out = Vec::new();
     for s in scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns) {
+        let poses = ScanPoses::new(s.start_ns, s.end_ns, |t| odom.at(t).ok());
         for p in s.points.iter().filter(|p| p.t_ns >= from && p.t_ns <= end_ns) {
             if p.x_m * p.x_m + p.y_m * p.y_m + p.z_m * p.z_m <= 0.25 {
                 continue;
             }
-            let Ok(pose) = odom.at(p.t_ns) else { continue };
+            let Some(pose) = poses.at(p.t_ns) else { continue };
             let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
             out.push(q.coords);
         }

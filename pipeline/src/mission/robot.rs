@@ -110,7 +110,7 @@ impl RobotCore {
     }
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<RobotStep>) {
-        self.placer.pending(scan.clone());
+        self.placer.pending(std::sync::Arc::new(scan.clone()));
         self.lio.push_scan(scan, &mut self.outs);
         self.drain(out);
     }
