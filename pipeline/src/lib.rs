@@ -21,5 +21,6 @@ pub mod lio;
 pub mod mission;
 pub mod pose;
 pub mod record;
+pub mod voxel_hash;
 
 pub use error::PipelineError;

@@ -74,6 +74,33 @@ pub async fn run(
                     None => {}
                 }
                 for step in steps.drain(..) {
+                    // The detection leaves first: it is what the latency is measured on.
+                    if let Some(det) = step.detection {
+                        let last_packet_host_ns = scan_hosts.iter().find(|(end, _)| *end == det.stamp_ns).map_or_else(host_now_ns, |(_, h)| *h);
+                        seq = seq.wrapping_add(1);
+                        let people = det
+                            .people
+                            .iter()
+                            .zip(&det.scores)
+                            .filter_map(|(p, score)| {
+                                Some(LinkPerson {
+                                    score: *score as f32,
+                                    bbox: p.bbox?,
+                                    points_world: p.points_world.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect(),
+                                })
+                            })
+                            .collect();
+                        let sent_host_ns = host_now_ns();
+                        let msg = LinkMessage::Detections { seq, stamp_ns: det.stamp_ns, scan_last_packet_host_ns: last_packet_host_ns, sent_host_ns, people };
+                        link.publish(&msg).await?;
+                        summary.detections_sent += 1;
+                        if let Some(r) = recorder.as_mut() {
+                            r.detections(det.stamp_ns, &det);
+                        }
+                        if let Some(w) = &watch {
+                            let _ = w.send(RobotEvent::Detection { detection: Box::new(det) });
+                        }
+                    }
                     let o = &step.output;
                     link.publish(&LinkMessage::RobotPose { stamp_ns: o.end_ns, world_t_lidar: o.lidar_pose }).await?;
                     if let Some(r) = recorder.as_mut() {
@@ -81,31 +108,6 @@ pub async fn run(
                     }
                     if let Some(w) = &watch {
                         let _ = w.send(RobotEvent::Pose { end_ns: o.end_ns, lidar_pose: o.lidar_pose });
-                    }
-                    let Some(det) = step.detection else { continue };
-                    let last_packet_host_ns = scan_hosts.iter().find(|(end, _)| *end == det.stamp_ns).map_or_else(host_now_ns, |(_, h)| *h);
-                    seq = seq.wrapping_add(1);
-                    let people = det
-                        .people
-                        .iter()
-                        .zip(&det.scores)
-                        .filter_map(|(p, score)| {
-                            Some(LinkPerson {
-                                score: *score as f32,
-                                bbox: p.bbox?,
-                                points_world: p.points_world.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect(),
-                            })
-                        })
-                        .collect();
-                    let sent_host_ns = host_now_ns();
-                    let msg = LinkMessage::Detections { seq, stamp_ns: det.stamp_ns, scan_last_packet_host_ns: last_packet_host_ns, sent_host_ns, people };
-                    link.publish(&msg).await?;
-                    summary.detections_sent += 1;
-                    if let Some(r) = recorder.as_mut() {
-                        r.detections(det.stamp_ns, &det);
-                    }
-                    if let Some(w) = &watch {
-                        let _ = w.send(RobotEvent::Detection { detection: Box::new(det) });
                     }
                 }
             }

@@ -1,35 +1,13 @@
 //! Points, voxel keys, the voxel downsampler and the voxel-hash neighbour index.
 
 use crate::cloud::PointCloud;
+use crate::voxel_hash::VoxelHashMap;
 use nalgebra::{Isometry3, Matrix3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
 pub type Vec3 = Vector3<f64>;
 pub type Key = (i32, i32, i32);
 
-/// Multiply-xor hasher for voxel keys: SipHash costs more than the rest of a lookup.
-#[derive(Default)]
-pub struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.write_u64(u64::from(*b));
-        }
-    }
-    fn write_i32(&mut self, i: i32) {
-        self.write_u64(i as u32 as u64);
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(23) ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    }
-}
-
-pub type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
+pub type KeyMap<V> = VoxelHashMap<Key, V>;
 
 /// Voxel of a point; coordinates beyond ±2^31 cells saturate (harmless: such points match nothing).
 pub fn key_of(p: &Vec3, inv_cell_m: f64) -> Key {

@@ -66,6 +66,15 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     (pose, shape * common)
 }
 
+/// A cluster at least this tall scores 0 in every posture (each height gate's upper edge plus
+/// its soft margin, as in [`score`]) and is [`too_big`].
+pub fn tallest_scorable_m(cfg: &DetectConfig) -> f64 {
+    (cfg.upright_height_m[1] + 0.15)
+        .max(cfg.low_height_m[1] + 0.1)
+        .max(cfg.upper_body_height_m[1] + 0.05)
+        .max(cfg.lying_height_m[1] + 0.05)
+}
+
 /// Whether a cluster is bigger than any person, so that splitting it may find one.
 pub fn too_big(f: &ClusterFeatures, cfg: &DetectConfig) -> bool {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);

@@ -2,30 +2,10 @@
 //! components, and plane peeling for clusters that hold a person and the wall, table or box
 //! they touch.
 
+use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
-/// A multiplicative hash for voxel keys (SipHash is several times slower here and the keys are
-/// not adversarial: they come from coordinates).
-#[derive(Default)]
-pub struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = (self.0.rotate_left(5) ^ u64::from(*b)).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-        }
-    }
-    fn write_i32(&mut self, v: i32) {
-        self.0 = (self.0.rotate_left(5) ^ u64::from(v as u32)).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-}
-
-type KeyMap<V> = HashMap<[i32; 3], V, BuildHasherDefault<KeyHasher>>;
+type KeyMap<V> = VoxelHashMap<[i32; 3], V>;
 
 /// One occupied voxel: the mean of its points (x, y, height above floor).
 #[derive(Clone, Copy, Debug)]
@@ -286,7 +266,7 @@ pub fn drop_tall_columns(grid: &Grid, cluster: &[u32], low_m: f64, min_low_share
     if (low as f64) < min_low_share * cluster.len() as f64 {
         return None;
     }
-    let tall: std::collections::HashSet<[i32; 2], BuildHasherDefault<KeyHasher>> = cluster
+    let tall: VoxelHashSet<[i32; 2]> = cluster
         .iter()
         .filter_map(|&v| centre(v))
         .filter(|c| c.centre.z >= low_m)

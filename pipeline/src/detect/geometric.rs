@@ -1,7 +1,7 @@
 //! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
 //! clusters, each cluster scored as a person.
 
-use super::classify::{score, too_big};
+use super::classify::{score, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
@@ -112,6 +112,15 @@ impl Detector for GeometricDetector {
             if npts < cfg.min_points {
                 continue;
             }
+            // Taller than anyone (a wall, a shelf): no posture can score it, so only split it,
+            // without its features (the heading search over thousands of voxels was the
+            // detector's largest cost). Its points span at least its voxel centres' heights.
+            if !self.keep_cluster_points && centre_height_span(&grid, &cluster) >= tallest_scorable_m(cfg) {
+                if depth < cfg.max_planes {
+                    stack.extend(split(&grid, &cluster, cfg, depth));
+                }
+                continue;
+            }
             let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m) else {
                 continue;
             };
@@ -143,28 +152,40 @@ impl Detector for GeometricDetector {
                 self.last_clusters.push((f, s));
                 continue;
             }
-            let split = depth < cfg.max_planes && too_big(&f, cfg);
+            let split_it = depth < cfg.max_planes && too_big(&f, cfg);
             self.last_clusters.push((f, s));
-            if !split {
-                continue;
-            }
-            // A mostly low cluster is a person lying against something taller more often than
-            // a plane: cut the tall columns first; otherwise peel the largest plane.
-            let rest = drop_tall_columns(&grid, &cluster, cfg.lying_height_m[1], LOW_SHARE).or_else(|| {
-                peel_plane(
-                    &grid,
-                    &cluster,
-                    cfg.plane_tolerance_m,
-                    cfg.plane_min_length_m,
-                    cfg.plane_min_width_m,
-                    cfg.lying_height_m[1],
-                    depth as u64,
-                )
-                .map(|(_, rest)| rest)
-            });
-            if let Some(rest) = rest {
-                stack.extend(grid.components(&rest).into_iter().map(|c| (c, depth + 1)));
+            if split_it {
+                stack.extend(split(&grid, &cluster, cfg, depth));
             }
         }
     }
+}
+
+/// Highest minus lowest voxel centre of a cluster.
+fn centre_height_span(grid: &Grid, cluster: &[u32]) -> f64 {
+    let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+    for v in cluster.iter().filter_map(|&v| grid.voxels.get(v as usize)) {
+        lo = lo.min(v.centre.z);
+        hi = hi.max(v.centre.z);
+    }
+    hi - lo
+}
+
+/// The parts of a cluster bigger than any person, one level deeper. A mostly low cluster is a
+/// person lying against something taller more often than a plane: cut the tall columns first;
+/// otherwise peel the largest plane.
+fn split(grid: &Grid, cluster: &[u32], cfg: &DetectConfig, depth: usize) -> Vec<(Vec<u32>, usize)> {
+    let rest = drop_tall_columns(grid, cluster, cfg.lying_height_m[1], LOW_SHARE).or_else(|| {
+        peel_plane(
+            grid,
+            cluster,
+            cfg.plane_tolerance_m,
+            cfg.plane_min_length_m,
+            cfg.plane_min_width_m,
+            cfg.lying_height_m[1],
+            depth as u64,
+        )
+        .map(|(_, rest)| rest)
+    });
+    rest.map(|rest| grid.components(&rest).into_iter().map(|c| (c, depth + 1)).collect()).unwrap_or_default()
 }

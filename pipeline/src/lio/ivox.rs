@@ -2,7 +2,7 @@
 //! nearest neighbours come from the query's voxel and its 26 neighbours. Voxels far from the
 //! sensor are dropped, so the map stays local and its cost bounded.
 
-use super::voxel_hash::VoxelHashMap;
+use crate::voxel_hash::VoxelHashMap;
 use nalgebra::Vector3;
 
 type Key = (i32, i32, i32);

@@ -19,7 +19,6 @@ mod so3;
 mod state;
 mod types;
 mod update;
-mod voxel_hash;
 
 pub use config::{ExtrinsicsSection, ImuSection, ImuSource, LioFile, MapSection, ScanSection, UpdateSection};
 pub use health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};

@@ -8,7 +8,7 @@ use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::types::{ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
-use super::voxel_hash::VoxelHashMap;
+use crate::voxel_hash::VoxelHashMap;
 use nalgebra::{Isometry3, Rotation3, Vector3};
 use std::collections::VecDeque;
 use std::time::Instant;
@@ -95,6 +95,9 @@ pub struct Lio {
     /// The measurement held since `state_ns`.
     held: Option<ImuSample>,
     imu: VecDeque<ImuSample>,
+    /// The newest IMU stamp seen, and the IMU's sample period (a running mean).
+    last_imu_ns: u64,
+    imu_period_ns: f64,
     scans: VecDeque<LioScan>,
     map: VoxelMap,
     monitor: HealthMonitor,
@@ -126,6 +129,8 @@ impl Lio {
             state_ns: 0,
             held: None,
             imu: VecDeque::new(),
+            last_imu_ns: 0,
+            imu_period_ns: 0.0,
             scans: VecDeque::new(),
             map,
             monitor: HealthMonitor::default(),
@@ -151,6 +156,17 @@ impl Lio {
 
     /// Feeds one IMU sample (in time order); scans waiting for it are processed into `out`.
     pub fn push_imu(&mut self, s: ImuSample, out: &mut Vec<ScanOutput>) {
+        if s.t_ns > self.last_imu_ns {
+            let dt_ns = (s.t_ns - self.last_imu_ns) as f64;
+            if self.last_imu_ns > 0 && dt_ns < 1e8 {
+                self.imu_period_ns = if self.imu_period_ns > 0.0 {
+                    self.imu_period_ns + (dt_ns - self.imu_period_ns) / 16.0
+                } else {
+                    dt_ns
+                };
+            }
+            self.last_imu_ns = s.t_ns;
+        }
         if let LioStatus::Initializing(_) = self.status {
             let (st, result) = self.init.push(&s);
             self.status = LioStatus::Initializing(st);
@@ -188,9 +204,20 @@ impl Lio {
         self.status = LioStatus::Running;
     }
 
+    /// A scan is processed once no IMU sample can still come before its end: the propagation
+    /// holds each sample until the next, so the one after the end adds nothing, and waiting for
+    /// it cost the live robot half an IMU period (2.5 ms at the Avia's 200 Hz) per scan. The next
+    /// sample is taken as due 0.9 periods after the last (jitter).
+    fn imu_covers(&self, end_ns: u64) -> bool {
+        if self.last_imu_ns >= end_ns {
+            return true;
+        }
+        self.imu_period_ns > 0.0 && ((end_ns - self.last_imu_ns) as f64) < 0.9 * self.imu_period_ns
+    }
+
     fn drain(&mut self, out: &mut Vec<ScanOutput>) {
         while let Some(end) = self.scans.front().map(|s| s.end_ns) {
-            if self.imu.back().is_none_or(|s| s.t_ns < end) {
+            if !self.imu_covers(end) {
                 return;
             }
             if let Some(scan) = self.scans.pop_front() {

@@ -7,10 +7,11 @@ use crate::align::encode_tiles;
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{DetectConfig, DetectWindow, Detection, Detector, GeometricDetector, WindowPoint};
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
 use starc_time::{Clock, Stamp};
-use std::collections::{HashMap, HashSet, VecDeque};
+use std::collections::VecDeque;
 use std::time::Instant;
 
 /// How the robot's side runs; the defaults are what `starc sim` measures.
@@ -77,8 +78,14 @@ pub struct RobotCore {
     placer: ScanPlacer,
     detector: GeometricDetector,
     window: VecDeque<Vec<WindowPoint>>,
-    map: HashMap<VoxelKey, Vector3<f64>>,
-    dirty_tiles: HashSet<VoxelKey>,
+    /// Placed scans not yet in the map: they go in when the map is next asked for, so that
+    /// growing the map never delays a detection.
+    unmapped: Vec<Vec<WindowPoint>>,
+    /// Occupied voxels of the map, and each tile's points (one per voxel).
+    voxels: VoxelHashSet<VoxelKey>,
+    tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
+    map_len: usize,
+    dirty_tiles: VoxelHashSet<VoxelKey>,
     tile_version: u32,
     outs: Vec<ScanOutput>,
 }
@@ -96,8 +103,11 @@ impl RobotCore {
             detector: GeometricDetector::new(cfg.detect.clone())?,
             placer: ScanPlacer::default(),
             window: VecDeque::new(),
-            map: HashMap::new(),
-            dirty_tiles: HashSet::new(),
+            unmapped: Vec::new(),
+            voxels: VoxelHashSet::default(),
+            tiles: VoxelHashMap::default(),
+            map_len: 0,
+            dirty_tiles: VoxelHashSet::default(),
             tile_version: 0,
             outs: Vec::new(),
             cfg,
@@ -119,7 +129,7 @@ impl RobotCore {
         let outs = std::mem::take(&mut self.outs);
         for o in outs {
             let placed = self.placer.place(&o);
-            self.add_to_map(&placed);
+            self.unmapped.push(placed.clone());
             self.window.push_back(placed);
             if self.window.len() > self.cfg.detect_scans {
                 self.window.pop_front();
@@ -129,20 +139,24 @@ impl RobotCore {
         }
     }
 
-    fn add_to_map(&mut self, placed: &[WindowPoint]) {
-        let per_tile = (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32;
-        for p in placed {
-            let v = p.xyz() / self.cfg.map_voxel_m;
-            let key = (v.x.floor() as i32, v.y.floor() as i32, v.z.floor() as i32);
-            if let std::collections::hash_map::Entry::Vacant(e) = self.map.entry(key) {
-                e.insert(p.xyz());
-                self.dirty_tiles.insert((
-                    key.0.div_euclid(per_tile),
-                    key.1.div_euclid(per_tile),
-                    key.2.div_euclid(per_tile),
-                ));
+    fn flush_map(&mut self) {
+        let per_tile = self.voxels_per_tile();
+        for placed in std::mem::take(&mut self.unmapped) {
+            for p in &placed {
+                let v = p.xyz() / self.cfg.map_voxel_m;
+                let key = (v.x.floor() as i32, v.y.floor() as i32, v.z.floor() as i32);
+                if self.voxels.insert(key) {
+                    let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
+                    self.tiles.entry(tile).or_default().push(p.xyz());
+                    self.dirty_tiles.insert(tile);
+                    self.map_len += 1;
+                }
             }
         }
+    }
+
+    fn voxels_per_tile(&self) -> i32 {
+        (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32
     }
 
     fn detect(&mut self, o: &ScanOutput) -> RobotDetection {
@@ -173,30 +187,26 @@ impl RobotCore {
     }
 
     /// The whole map for alignment (one point per voxel), in the robot's world.
-    pub fn map_points(&self) -> Vec<Vector3<f64>> {
-        self.map.values().copied().collect()
+    pub fn map_points(&mut self) -> Vec<Vector3<f64>> {
+        self.flush_map();
+        self.tiles.values().flatten().copied().collect()
     }
 
-    pub fn map_len(&self) -> usize {
-        self.map.len()
+    pub fn map_len(&mut self) -> usize {
+        self.flush_map();
+        self.map_len
     }
 
     /// The map tiles changed since the last call, encoded (see [`crate::align::tiles`]); every
     /// call that sends anything bumps the version, so a rig keeps the newest of each tile.
     pub fn take_changed_tiles(&mut self) -> Result<Vec<Vec<u8>>, PipelineError> {
+        self.flush_map();
         if self.dirty_tiles.is_empty() {
             return Ok(Vec::new());
         }
-        let per_tile = (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32;
+        let per_tile = self.voxels_per_tile();
         let dirty = std::mem::take(&mut self.dirty_tiles);
-        let points: Vec<Vector3<f64>> = self
-            .map
-            .iter()
-            .filter(|(k, _)| {
-                dirty.contains(&(k.0.div_euclid(per_tile), k.1.div_euclid(per_tile), k.2.div_euclid(per_tile)))
-            })
-            .map(|(_, p)| *p)
-            .collect();
+        let points: Vec<Vector3<f64>> = dirty.iter().filter_map(|t| self.tiles.get(t)).flatten().copied().collect();
         self.tile_version = self.tile_version.wrapping_add(1);
         let edge_m = f64::from(per_tile) * self.cfg.map_voxel_m;
         let normals = vec![None; points.len()];

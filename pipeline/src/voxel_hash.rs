@@ -1,8 +1,9 @@
-//! A hasher for integer voxel keys. The standard SipHash guards against adversarial keys, which
-//! voxel coordinates of our own making are not, and costs several times more per lookup: the
-//! update does tens of thousands of lookups per scan.
+//! The one hasher for integer voxel keys (LIO map, alignment grids, detector grid, mission map).
+//! The standard SipHash guards against adversarial keys, which voxel coordinates of our own
+//! making are not, and costs several times more per lookup: the LIO update alone does tens of
+//! thousands of lookups per scan.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
 
 /// Multiply-rotate mixing of each written integer (the FxHash scheme).
@@ -12,10 +13,24 @@ pub struct VoxelHasher(u64);
 const SEED: u64 = 0x51_7c_c1_b7_27_22_0a_95;
 
 impl Hasher for VoxelHasher {
+    /// Array keys (`[i32; 3]`) arrive here as one byte slice: mix them a word at a time, not
+    /// a byte at a time (that had made hashing a tenth of the mission's CPU time).
     fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
+        let mut words = bytes.chunks_exact(4);
+        for w in &mut words {
+            self.add(u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])));
+        }
+        for b in words.remainder() {
             self.add(u64::from(*b));
         }
+    }
+
+    fn write_u32(&mut self, v: u32) {
+        self.add(u64::from(v));
+    }
+
+    fn write_usize(&mut self, v: usize) {
+        self.add(v as u64);
     }
 
     fn write_i32(&mut self, v: i32) {
@@ -38,6 +53,7 @@ impl VoxelHasher {
 }
 
 pub type VoxelHashMap<K, V> = HashMap<K, V, BuildHasherDefault<VoxelHasher>>;
+pub type VoxelHashSet<K> = HashSet<K, BuildHasherDefault<VoxelHasher>>;
 
 #[cfg(test)]
 mod tests {
@@ -62,5 +78,12 @@ mod tests {
         };
         assert_ne!(hash((0, 0, 1)), hash((0, 1, 0)));
         assert_ne!(hash((1, 0, 0)), hash((0, 1, 0)));
+        let hash_array = |k: [i32; 3]| {
+            let mut h = VoxelHasher::default();
+            std::hash::Hash::hash(&k, &mut h);
+            h.finish()
+        };
+        assert_ne!(hash_array([0, 0, 1]), hash_array([0, 1, 0]));
+        assert_ne!(hash_array([-1, 0, 0]), hash_array([0, 0, -1]));
     }
 }
