@@ -23,6 +23,9 @@ pub struct InitResult {
     pub rot_world_imu: Rotation3<f64>,
     pub gravity_m_s2: f64,
     pub bias_gyro: Vector3<f64>,
+    /// The gyro's spread over the window: how far off `bias_gyro` may be (a rig held in hand
+    /// turns a little while it counts as still).
+    pub gyro_std_rad_s: f64,
     pub end_ns: u64,
 }
 
@@ -39,7 +42,7 @@ pub struct StaticInit {
 
 impl StaticInit {
     pub fn new(window_ns: u64) -> Self {
-        Self::with_limits(window_ns, 0.02, 0.1)
+        Self::with_limits(window_ns, 0.06, 0.2)
     }
 
     /// A window that counts as still while the gyro and accelerometer spreads (standard
@@ -72,7 +75,13 @@ impl StaticInit {
             // Upside down: any half turn about a horizontal axis.
             Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
         });
-        let result = InitResult { rot_world_imu, gravity_m_s2: mean_a.norm(), bias_gyro: mean_g, end_ns: imu.t_ns };
+        let result = InitResult {
+            rot_world_imu,
+            gravity_m_s2: mean_a.norm(),
+            bias_gyro: mean_g,
+            gyro_std_rad_s: gyro_std,
+            end_ns: imu.t_ns,
+        };
         (InitStatus::Done, Some(result))
     }
 

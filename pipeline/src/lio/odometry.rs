@@ -43,8 +43,8 @@ impl Default for LioConfig {
             rot_imu_lidar: Rotation3::identity(),
             pos_imu_lidar: Vector3::new(0.04165, 0.02326, -0.0284),
             init_window_ns: 1_000_000_000,
-            init_max_gyro_std_rad_s: 0.02,
-            init_max_acc_std_m_s2: 0.1,
+            init_max_gyro_std_rad_s: 0.06,
+            init_max_acc_std_m_s2: 0.2,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
@@ -193,7 +193,9 @@ impl Lio {
         self.state.bias_gyro = r.bias_gyro;
         self.state.gravity = Vector3::new(0.0, 0.0, -r.gravity_m_s2);
         let mut cov = Cov::zeros();
-        for (at, v) in [(ROT, 1e-4), (POS, 1e-6), (VEL, 1e-4), (BG, 1e-6), (BA, 1e-3), (GRAV, 1e-4)] {
+        // The gyro bias is as uncertain as the gyro was unsteady while "still".
+        let bias_var = r.gyro_std_rad_s.powi(2).max(1e-6);
+        for (at, v) in [(ROT, 1e-4), (POS, 1e-6), (VEL, 1e-4), (BG, bias_var), (BA, 1e-3), (GRAV, 1e-4)] {
             for i in at..at + 3 {
                 cov[(i, i)] = v;
             }
