@@ -269,7 +269,17 @@ impl Scorer {
     pub fn detection(&mut self, d: &RobotDetection) {
         if let Some(l_t_w) = &self.lio_t_world {
             let truth_people = truth_in_world(&truth::people_at(&self.truth.people, d.stamp_ns), l_t_w, &d.points);
-            self.counts.add(&match_window(&d.found, &truth_people, &MatchRule::default()).counts);
+            let m = match_window(&d.found, &truth_people, &MatchRule::default());
+            if tracing::enabled!(tracing::Level::DEBUG) {
+                let w_t_l = l_t_w.inverse();
+                for (det, label) in d.found.iter().zip(&m.detection_label) {
+                    if label.is_none() {
+                        let at = w_t_l.transform_point(&det.centre_m.into());
+                        tracing::debug!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "false positive (scenario frame)");
+                    }
+                }
+            }
+            self.counts.add(&m.counts);
             self.windows += 1;
         }
     }

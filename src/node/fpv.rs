@@ -19,7 +19,6 @@ use starc_pipeline::record::Topic;
 use starc_pipeline::PipelineError;
 use std::time::Instant;
 use tokio::sync::mpsc;
-use tokio::task::JoinHandle;
 
 /// Detections stay on screen this long after the robot last saw them.
 pub const HOLD_NS: u64 = 1_000_000_000;
@@ -77,7 +76,7 @@ struct Waiting {
     recv_host_ns: u64,
 }
 
-type Job = JoinHandle<Result<AlignOutcome, PipelineError>>;
+type Job = tokio::sync::oneshot::Receiver<Result<AlignOutcome, PipelineError>>;
 
 /// Runs until `stop`. `schedule` lists (index, rig LiDAR time) of extra frames to render and
 /// report through `watch` (the simulator's camera frames); live frames need none.
@@ -127,7 +126,7 @@ pub async fn run(
             _ = wait_tick.tick(), if passed_at.is_some() => {}
             done = async { match job.as_mut() { Some(j) => j.await, None => std::future::pending().await } } => {
                 job = None;
-                let outcome = done.unwrap_or_else(|e| Err(PipelineError::BadPose { t_ns: 0, reason: format!("alignment task: {e}") }));
+                let outcome = done.unwrap_or_else(|_| Err(PipelineError::BadPose { t_ns: 0, reason: "the alignment thread ended without a result".into() }));
                 let report = outcome.as_ref().ok().map(|o| (o.end_ns, o.world_t_lidar, o.report.total_ms));
                 let verdict = core.apply(outcome);
                 summary.alignments += 1;
@@ -204,7 +203,7 @@ pub async fn run(
         }
         if job.is_none() {
             if let Some(j) = core.next_job() {
-                job = Some(tokio::task::spawn_blocking(move || j.run()));
+                job = Some(super::background::spawn_low_priority("rig-align", move || j.run()));
             }
         }
         let Some((last_ns, _)) = core.last() else { continue };

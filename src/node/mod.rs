@@ -2,6 +2,7 @@
 //! the link (starc-link, zenoh). Each wires a live driver to its side of the mission
 //! (`starc_pipeline::mission`) and its outputs; `starc sim` runs both against mock devices.
 
+mod background;
 pub mod config;
 pub mod fpv;
 pub mod recording;

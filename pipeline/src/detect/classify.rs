@@ -21,6 +21,12 @@ const FACE_MIN_POINTS: usize = 300;
 /// jamb or the corner of a box is not).
 const MIN_LENGTH_M: f64 = 0.2;
 
+/// A body seen from any side is at least this deep (the edge of a seat row, a door leaf or a
+/// shelf's side, left over once the planes behind them are peeled, is thinner). Only clusters
+/// with enough points to measure it are held to it: far away, a person is a sliver.
+const MIN_WIDTH_M: f64 = 0.15;
+const MIN_WIDTH_FEW_POINTS_M: f64 = 0.1;
+
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
@@ -28,6 +34,7 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     // lying body is low and round: most of its points are near its box's faces anyway.) With
     // few points (far away, a sliver through a gap) most of them are near some face anyway, so
     // only nearly all of them on faces counts against it.
+    let min_width = if f.points >= FACE_MIN_POINTS { MIN_WIDTH_M } else { MIN_WIDTH_FEW_POINTS_M };
     let max_face = if f.points >= FACE_MIN_POINTS { cfg.max_face_share } else { (cfg.max_face_share + 0.25).min(0.9) };
     let boxy = band(f.face_share, 0.0, max_face, 0.1);
     let thick = band(f.thickness_m, cfg.min_thickness_m, f64::MAX, 0.005) * boxy;
@@ -37,14 +44,14 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
         * not_flat
         * band(height, cfg.upright_height_m[0], cfg.upright_height_m[1], 0.15)
         * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
-        * band(width, 0.1, 0.9, 0.03)
+        * band(width, min_width, 0.9, 0.03)
         // Feet near the floor or a stage, never a body hanging in the air.
         * band(f.bottom_m, f64::MIN, 0.5_f64.max(cfg.max_bottom_m - 0.4), 0.2);
     let low = thick
         * not_flat
         * band(height, cfg.low_height_m[0], cfg.low_height_m[1], 0.1)
         * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
-        * band(width, 0.1, 0.9, 0.03)
+        * band(width, min_width, 0.9, 0.03)
         * band(f.bottom_m, f64::MIN, cfg.max_bottom_m, 0.2);
     // Head and shoulders above a table, a seat back or a stage edge: nothing else floats.
     let upper = thick
@@ -52,7 +59,7 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
         * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
         * band(f.bottom_m, 0.45, f64::MAX, 0.1)
         * band(length, MIN_LENGTH_M, 0.8, 0.1)
-        * band(width, 0.1, 0.7, 0.03);
+        * band(width, min_width, 0.7, 0.03);
     let lying = not_flat
         * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], 0.05)
         * band(length, cfg.lying_length_m[0], cfg.lying_length_m[1], 0.15)
