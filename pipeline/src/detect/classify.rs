@@ -24,7 +24,7 @@ const MIN_LENGTH_M: f64 = 0.2;
 /// A body seen from any side is at least this deep (the edge of a seat row, a door leaf or a
 /// shelf's side, left over once the planes behind them are peeled, is thinner). Only clusters
 /// with enough points to measure it are held to it: far away, a person is a sliver.
-const MIN_WIDTH_M: f64 = 0.15;
+const MIN_WIDTH_M: f64 = 0.18;
 const MIN_WIDTH_FEW_POINTS_M: f64 = 0.1;
 
 /// The best posture and its score in [0, 1].
