@@ -70,6 +70,7 @@ impl Default for RigCoreConfig {
 /// One registration of the rig's window against the robot's map, ready to run anywhere: it
 /// holds what it needs (shared scans, a copy of the odometry), so building the window, the
 /// costly part besides the registration, runs wherever the job does.
+#[derive(Clone)]
 pub struct AlignJob {
     pub end_ns: u64,
     pub tracking: bool,
@@ -90,9 +91,22 @@ pub struct AlignOutcome {
     pub report: AlignReport,
     /// The rig's LiDAR pose in the robot's world, as registered.
     pub world_t_lidar: Isometry3<f64>,
+    /// The registered window's frame to the rig's LiDAR at `end_ns`: any attempt's `pose` times
+    /// this is the LiDAR's pose that attempt claims.
+    pub frame_t_lidar: Isometry3<f64>,
+    /// The rig's odometry pose at `end_ns` (what the window was built with).
+    pub odom_t_lidar: Isometry3<f64>,
 }
 
 impl AlignJob {
+    /// The same window registered from another guess of the LiDAR's world pose with other
+    /// settings (diagnosis: e.g. one attempt from the true pose).
+    pub fn with_guess(mut self, guess_world_t_lidar: Isometry3<f64>, config: AlignConfig) -> Self {
+        self.guess_world_t_lidar = guess_world_t_lidar;
+        self.config = config;
+        self
+    }
+
     pub fn run(self) -> Result<AlignOutcome, PipelineError> {
         // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
         // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
@@ -102,8 +116,37 @@ impl AlignJob {
         let aligner = Aligner::new(&self.target, self.config)?;
         let report = aligner.align(&source, &(self.guess_world_t_lidar * self.lidar_pose.inverse() * frame));
         // The registered frame back to the rig's LiDAR pose in the world.
-        let world_t_lidar = report.pose * frame.inverse() * self.lidar_pose;
-        Ok(AlignOutcome { end_ns: self.end_ns, tracking: self.tracking, report, world_t_lidar })
+        let frame_t_lidar = frame.inverse() * self.lidar_pose;
+        let world_t_lidar = report.pose * frame_t_lidar;
+        // Every full attempt, for `RUST_LOG=starc_pipeline=debug`: the failure sentence names
+        // only the best one.
+        for a in &report.attempts {
+            let claimed = a.pose * frame_t_lidar;
+            let m = &a.metrics;
+            tracing::debug!(
+                end_ns = self.end_ns,
+                tracking = self.tracking,
+                seed_yaw_deg = a.seed_yaw_offset_deg,
+                seed_shift_m = ?a.seed_shift_m,
+                x_m = claimed.translation.x,
+                y_m = claimed.translation.y,
+                yaw_deg = claimed.rotation.euler_angles().2.to_degrees(),
+                rms_m = m.rms_residual_m,
+                inliers = m.inlier_ratio,
+                degeneracy = m.degeneracy_index,
+                accepted = a.accepted,
+                why = %a.rejected_because.join("; "),
+                "rig alignment attempt"
+            );
+        }
+        Ok(AlignOutcome {
+            end_ns: self.end_ns,
+            tracking: self.tracking,
+            report,
+            world_t_lidar,
+            frame_t_lidar,
+            odom_t_lidar: self.lidar_pose,
+        })
     }
 }
 
@@ -116,7 +159,8 @@ pub enum AlignVerdict {
     Rejected {
         reason: String,
     },
-    /// Passed its tests, but lies `off_m` from the expected start.
+    /// Passed its tests, but puts the rig's start (its first odometry pose, carried by the
+    /// odometry to the registered pose) `off_m` from the expected start.
     FarFromStart {
         off_m: f64,
     },
@@ -132,6 +176,8 @@ pub struct RigCore {
     scans: VecDeque<Arc<LioScan>>,
     points: Vec<Vector3<f64>>,
     first_ns: Option<u64>,
+    /// The odometry's pose at `first_ns`: where the rig started, in its own frame.
+    first_pose: Isometry3<f64>,
     next_align_ns: u64,
     in_flight: bool,
     start_hint: Isometry3<f64>,
@@ -154,6 +200,7 @@ impl RigCore {
             scans: VecDeque::new(),
             points: Vec::new(),
             first_ns: None,
+            first_pose: Isometry3::identity(),
             next_align_ns: 0,
             in_flight: false,
             start_hint: Isometry3::identity(),
@@ -166,13 +213,21 @@ impl RigCore {
     }
 
     /// Where the responder is expected to start, in the robot's world (a marked entry point, a
-    /// hand-off next to the robot): the first alignment is seeded there and gated around it.
+    /// hand-off next to the robot): the LiDAR's pose at the rig's first odometry pose. Until the
+    /// first alignment, the odometry carries it to the rig's current pose to seed the search, and
+    /// a result is refused when the start it implies (the result carried back by the odometry)
+    /// lies more than `start_gate_m` from it: the responder may have walked far since.
     pub fn set_start_hint(&mut self, world_t_lidar: Isometry3<f64>) {
         self.start_hint = world_t_lidar;
     }
 
     pub fn start_hint(&self) -> &Isometry3<f64> {
         &self.start_hint
+    }
+
+    /// The rig's odometry frame in the world, as the start hint places it.
+    fn hint_world_t_odom(&self) -> Isometry3<f64> {
+        self.start_hint * self.first_pose.inverse()
     }
 
     /// The robot's map (already one point per voxel of `voxel_m`, in its world); replaces the
@@ -205,7 +260,10 @@ impl RigCore {
             self.points = placed.iter().map(|p| p.xyz()).collect();
             let _ = self.world.push_odometry(o.end_ns, o.lidar_pose);
             let _ = self.odom.push(o.end_ns, o.lidar_pose);
-            self.first_ns.get_or_insert(o.end_ns);
+            if self.first_ns.is_none() {
+                self.first_ns = Some(o.end_ns);
+                self.first_pose = o.lidar_pose;
+            }
             while self.scans.front().is_some_and(|s| s.end_ns + self.cfg.max_first_window_ns < o.end_ns) {
                 self.scans.pop_front();
             }
@@ -258,9 +316,10 @@ impl RigCore {
         let window_ns = if aligned { wait_ns } else { (end_ns - first).min(self.cfg.max_first_window_ns) };
         let from = end_ns.saturating_sub(window_ns);
         let scans = self.scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns).cloned().collect();
-        // Without a world pose the responder is taken to start near the expected start; the yaw
-        // grid does the rest.
-        let guess = self.world.world_pose(end_ns).ok().flatten().unwrap_or(self.start_hint);
+        // Without a world pose the responder is taken to have started at the expected start and
+        // moved as the odometry says since; the yaw grid does the rest.
+        let guess =
+            self.world.world_pose(end_ns).ok().flatten().unwrap_or_else(|| self.hint_world_t_odom() * lidar_pose);
         self.attempts += 1;
         self.in_flight = true;
         self.next_align_ns = end_ns + if aligned { self.cfg.reregister_ns } else { self.cfg.retry_ns };
@@ -290,9 +349,11 @@ impl RigCore {
             return AlignVerdict::Rejected { reason: format!("{:?}", o.report.failure) };
         }
         let first = !self.aligned();
-        let off_m = (o.world_t_lidar.translation.vector - self.start_hint.translation.vector).norm();
-        if first && off_m > self.cfg.start_gate_m {
-            return AlignVerdict::FarFromStart { off_m };
+        if first {
+            let off_m = start_offset_m(&o.world_t_lidar, &o.odom_t_lidar, &self.first_pose, &self.start_hint);
+            if off_m > self.cfg.start_gate_m {
+                return AlignVerdict::FarFromStart { off_m };
+            }
         }
         if let Err(e) = self.world.push_registration(o.end_ns, o.world_t_lidar) {
             return AlignVerdict::Rejected { reason: e.to_string() };
@@ -300,6 +361,19 @@ impl RigCore {
         self.accepted += 1;
         AlignVerdict::Accepted { first }
     }
+}
+
+/// How far from the expected start `hint` a registered pose `world_t_lidar` (the odometry's
+/// `odom_t_lidar` at the same time) puts the rig's first odometry pose `first_pose`: the
+/// registration carried back by the odometry to the start, which is what the hint is about.
+fn start_offset_m(
+    world_t_lidar: &Isometry3<f64>,
+    odom_t_lidar: &Isometry3<f64>,
+    first_pose: &Isometry3<f64>,
+    hint: &Isometry3<f64>,
+) -> f64 {
+    let start = world_t_lidar * odom_t_lidar.inverse() * first_pose;
+    (start.translation.vector - hint.translation.vector).norm()
 }
 
 /// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
@@ -327,4 +401,30 @@ fn window(
         }
     }
     (out, frame)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::start_offset_m;
+    use crate::align::pose_xyz_yaw;
+
+    #[test]
+    fn the_start_gate_measures_where_the_rig_started_not_where_it_is() {
+        // The rig started at the odometry's origin facing +x, then walked 10 m ahead and turned
+        // 90 deg left; the hint puts the start at (2, 3) facing +y in the world.
+        let first = pose_xyz_yaw(0.0, 0.0, 1.5, 0.0);
+        let now = pose_xyz_yaw(10.0, 0.0, 1.5, 90.0);
+        let hint = pose_xyz_yaw(2.0, 3.0, 1.5, 90.0);
+        // A registration that agrees with the hint and the odometry: 10 m from the hint, but its
+        // start is the hint's.
+        let right = pose_xyz_yaw(2.0, 13.0, 1.5, 180.0);
+        assert!(start_offset_m(&right, &now, &first, &hint) < 1e-9);
+        // Half a metre along the walk: its start is half a metre off too.
+        let near = pose_xyz_yaw(2.0, 13.5, 1.5, 180.0);
+        assert!((start_offset_m(&near, &now, &first, &hint) - 0.5).abs() < 1e-9);
+        // On the hint itself (what the old gate, on the current pose, wanted) but turned the
+        // other way: the start it implies lies the walk's 10 m away.
+        let flipped = pose_xyz_yaw(2.0, 3.0, 1.5, 0.0);
+        assert!((start_offset_m(&flipped, &now, &first, &hint) - 10.0).abs() < 1e-9);
+    }
 }

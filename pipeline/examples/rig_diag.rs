@@ -1,0 +1,185 @@
+//! Diagnosis of the rig's alignment attempts on a `starc sim --sensors-only` run, against the
+//! truth: `cargo run --release -p starc-pipeline --example rig_diag -- DIR [hint_m hint_deg]`.
+//! Runs the offline mission's robot and rig cores in time order (as `starc mission` does) and
+//! prints, per attempt, every full attempt's result against the truth, the start gate, and a
+//! single attempt from the true pose.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use starc_pipeline::align::{pose_error, AlignConfig};
+use starc_pipeline::lio::{ImuSample, LioScan};
+use starc_pipeline::mission::{RigCore, RigCoreConfig, RobotCore, RobotCoreConfig};
+use std::net::Ipv4Addr;
+use std::path::PathBuf;
+
+#[path = "../../tests/support/avia_decode.rs"]
+mod avia_decode;
+#[path = "../../tests/support/tum.rs"]
+mod tum;
+
+enum Ev {
+    Imu(bool, ImuSample),
+    Scan(bool, LioScan),
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = PathBuf::from(args.get(1).expect("DIR"));
+    let hint_m: f64 = args.get(2).map_or(1.0, |a| a.parse().unwrap());
+    let hint_deg: f64 = args.get(3).map_or(20.0, |a| a.parse().unwrap());
+    let gate_m: f64 = std::env::var("GATE_M").map_or(2.0, |v| v.parse().unwrap());
+    let gt_robot = tum::read_tum(&dir.join("gt_robot.tum"));
+    let gt_fpv = tum::read_tum(&dir.join("gt_fpv.tum"));
+    let pcap = dir.join("avia.pcap");
+    let robot = avia_decode::decode(&pcap, Ipv4Addr::new(192, 168, 1, 101));
+    let rig = avia_decode::decode(&pcap, Ipv4Addr::new(192, 168, 2, 102));
+    let mut evs: Vec<(u64, Ev)> = Vec::new();
+    evs.extend(robot.imu.into_iter().map(|s| (s.t_ns, Ev::Imu(true, s))));
+    evs.extend(robot.scans.into_iter().map(|s| (s.end_ns, Ev::Scan(true, s))));
+    evs.extend(rig.imu.into_iter().map(|s| (s.t_ns, Ev::Imu(false, s))));
+    evs.extend(rig.scans.into_iter().map(|s| (s.end_ns, Ev::Scan(false, s))));
+    evs.sort_by_key(|e| e.0);
+
+    let mut rc = RobotCore::new(RobotCoreConfig::default()).unwrap();
+    let max_window_s: f64 = std::env::var("MAX_WINDOW_S").map_or(10.0, |v| v.parse().unwrap());
+    let mut core = RigCore::new(RigCoreConfig {
+        start_gate_m: gate_m,
+        max_first_window_ns: (max_window_s * 1e9) as u64,
+        ..RigCoreConfig::default()
+    })
+    .unwrap();
+    let (mut rsteps, mut routs) = (Vec::new(), Vec::new());
+    let mut lio_t_world: Option<Isometry3<f64>> = None;
+    let mut odom: Vec<(u64, Isometry3<f64>)> = Vec::new();
+    let mut hint_set = false;
+    for (_, ev) in evs {
+        match ev {
+            Ev::Imu(true, s) => rc.push_imu(s, &mut rsteps),
+            Ev::Scan(true, s) => rc.push_scan(s, &mut rsteps),
+            Ev::Imu(false, s) => core.push_imu(s, &mut routs),
+            Ev::Scan(false, s) => core.push_scan(s, &mut routs),
+        }
+        for st in rsteps.drain(..) {
+            if lio_t_world.is_none() {
+                lio_t_world = Some(st.output.lidar_pose * tum::truth_at(&gt_robot, st.output.end_ns).inverse());
+            }
+        }
+        for o in routs.drain(..) {
+            odom.push((o.end_ns, o.lidar_pose));
+            let (Some(first), Some(l_t_w)) = (core.first_ns(), lio_t_world) else { continue };
+            if !hint_set {
+                let off = Isometry3::from_parts(
+                    Translation3::new(0.8 * hint_m, -0.6 * hint_m, 0.0),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, hint_deg.to_radians()),
+                );
+                core.set_start_hint(l_t_w * tum::truth_at(&gt_fpv, first) * off);
+                hint_set = true;
+            }
+            if core.wants_map() && rc.map_len() != core.map_len() {
+                core.set_map(rc.map_points());
+            }
+            let Some(job) = core.next_job() else { continue };
+            let end = job.end_ns;
+            let truth = l_t_w * tum::truth_at(&gt_fpv, end);
+            let t_s = (end - first) as f64 * 1e-9;
+            let truth_job = job.clone();
+            let o = job.run().unwrap();
+            // The pose the attempt claims for the rig at its first scan (what the hint is about).
+            let o_first = odom.first().map(|p| p.1).unwrap();
+            let o_end = odom.iter().rev().find(|p| p.0 <= end).map(|p| p.1).unwrap();
+            let start_of = |w: &Isometry3<f64>| w * o_end.inverse() * o_first;
+            let hint = *core.start_hint();
+            let true_xy = truth.translation.vector;
+            println!(
+                "== t {:5.1} s (truth x {:6.2} y {:5.2}) tracking {} {} source pts, {} seeds, {:.0} ms",
+                t_s,
+                true_xy.x,
+                true_xy.y,
+                o.tracking,
+                o.report.source_points,
+                o.report.seeds.len(),
+                o.report.total_ms
+            );
+            for (i, a) in o.report.attempts.iter().enumerate() {
+                let w = a.pose * o.frame_t_lidar;
+                let (em, ed) = pose_error(&w, &truth);
+                let m = &a.metrics;
+                let off_now = (w.translation.vector - hint.translation.vector).norm();
+                let off_start = (start_of(&w).translation.vector - hint.translation.vector).norm();
+                println!(
+                    "  att{i} seed {:+4.0} deg [{:+.1},{:+.1}]: err {:6.2} m {:6.1} deg | rms {:.4} inl {:.3} upd {:.1e} deg {:.2e} | gate now {:5.2} start {:5.2} | acc {} {}",
+                    a.seed_yaw_offset_deg,
+                    a.seed_shift_m[0],
+                    a.seed_shift_m[1],
+                    em,
+                    ed,
+                    m.rms_residual_m,
+                    m.inlier_ratio,
+                    m.update_norm,
+                    m.degeneracy_index,
+                    off_now,
+                    off_start,
+                    a.accepted,
+                    a.rejected_because.join("; ")
+                );
+                for p in &a.alternatives {
+                    println!(
+                        "      alt seed {:+4.0}: moved {:.2} m {:.1} deg rms {:.4} inl {:.3}",
+                        p.yaw_deg, p.moved_m, p.moved_deg, p.rms_residual_m, p.inlier_ratio
+                    );
+                }
+            }
+            // Where the seed nearest the truth ranked.
+            let truth_frame = truth * o.frame_t_lidar.inverse();
+            if let Some((rank, s, d)) = o
+                .report
+                .seeds
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (i, s, pose_error(&s.pose, &truth_frame)))
+                .min_by(|a, b| (a.2 .0 + a.2 .1 / 10.0).total_cmp(&(b.2 .0 + b.2 .1 / 10.0)))
+            {
+                let best = o.report.seeds.first().map_or(0.0, |s| s.score);
+                println!(
+                    "  nearest seed to truth: rank {rank}/{} yaw {:+.0} shift [{:+.1},{:+.1}] {:.2} m {:.1} deg, score {:.3} (best {:.3})",
+                    o.report.seeds.len(),
+                    s.yaw_offset_deg,
+                    s.shift_m[0],
+                    s.shift_m[1],
+                    d.0,
+                    d.1,
+                    s.score,
+                    best
+                );
+            }
+            // One attempt from the truth: NDT 1 m then ICP, the same acceptance and consistency check.
+            let cfg = AlignConfig {
+                reseed_yaw_step_deg: 0.0,
+                ndt_resolutions_m: vec![1.0],
+                seed_levels: 1,
+                ..AlignConfig::default()
+            };
+            let t = truth_job.with_guess(truth, cfg).run().unwrap();
+            if let Some(a) = t.report.attempts.first() {
+                let w = a.pose * t.frame_t_lidar;
+                let (em, ed) = pose_error(&w, &truth);
+                let m = &a.metrics;
+                println!(
+                    "  from truth: settles {:.3} m {:.2} deg | rms {:.4} inl {:.3} upd {:.1e} deg {:.2e} hops {} | acc {} {}",
+                    em,
+                    ed,
+                    m.rms_residual_m,
+                    m.inlier_ratio,
+                    m.update_norm,
+                    m.degeneracy_index,
+                    a.verify_hops,
+                    a.accepted,
+                    a.rejected_because.join("; ")
+                );
+            }
+            let (chosen_m, chosen_deg) = pose_error(&o.world_t_lidar, &truth);
+            let verdict = core.apply(Ok(o));
+            println!("  verdict {verdict:?} (chosen {chosen_m:.2} m {chosen_deg:.1} deg off truth)");
+        }
+    }
+}
