@@ -278,6 +278,17 @@ impl Scorer {
                         tracing::debug!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "false positive (scenario frame)");
                     }
                 }
+                for t in truth_people.iter().filter(|t| m.missed.contains(&t.label)) {
+                    let at = w_t_l.transform_point(&t.centre_m.into());
+                    tracing::debug!(
+                        stamp_ns = d.stamp_ns,
+                        label = t.label,
+                        x_m = at.x,
+                        y_m = at.y,
+                        returns = t.returns,
+                        "missed (scenario frame)"
+                    );
+                }
             }
             self.counts.add(&m.counts);
             self.windows += 1;
