@@ -66,6 +66,10 @@ pub struct DetectConfig {
     pub min_thickness_m: f64,
     /// Detections scoring below this are dropped.
     pub min_score: f64,
+    /// A cluster whose top reaches within this of the upper edge of the sensor's field of view
+    /// (learned from the window) has no known height: it is taken only as an upright person at
+    /// least `upright_height_m[0]` tall, never as sitting or crouching (0: no check).
+    pub fov_edge_margin_deg: f64,
 }
 
 impl Default for DetectConfig {
@@ -96,6 +100,7 @@ impl Default for DetectConfig {
             max_planarity: 0.25,
             min_thickness_m: 0.02,
             min_score: 0.5,
+            fov_edge_margin_deg: 1.0,
         }
     }
 }
@@ -143,6 +148,9 @@ impl DetectConfig {
         let shares = [self.floor_min_share, self.max_face_share, self.max_planarity, self.min_score];
         if shares.iter().any(|v| !(*v >= 0.0 && *v <= 1.0)) {
             return Err(bad("floor_min_share, max_face_share, max_planarity and min_score must be in [0, 1]"));
+        }
+        if !(self.fov_edge_margin_deg.is_finite() && (0.0..=20.0).contains(&self.fov_edge_margin_deg)) {
+            return Err(bad("fov_edge_margin_deg must be between 0 and 20"));
         }
         if !self.max_bottom_m.is_finite() {
             return Err(bad("max_bottom_m must be finite"));

@@ -5,7 +5,8 @@ use super::classify::{score, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
-use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel};
+use super::fov::FovEnvelope;
+use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
 use crate::PipelineError;
 use nalgebra::Vector3;
 
@@ -92,6 +93,7 @@ impl Detector for GeometricDetector {
             }
         }
         let grid = Grid::new(&self.kept, cfg.voxel_m);
+        let envelope = FovEnvelope::new(window.points, &window.sensor_pose, window.stamp.ns);
         let all: Vec<u32> = (0..grid.voxels.len() as u32).collect();
         let points = window.points;
         let lookup = |i: u32| {
@@ -131,6 +133,21 @@ impl Detector for GeometricDetector {
             }
             if self.keep_cluster_points {
                 self.last_cluster_points.push(cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect());
+            }
+            // Cut by the top of the field of view, its height is the view's: only a cluster
+            // already as tall as a standing person can be one (checked for candidates only: it
+            // costs a transform per point).
+            let short_of_upright = pose != PersonPose::Upright || f.size.z < cfg.upright_height_m[0];
+            if s >= cfg.min_score
+                && pose != PersonPose::Lying
+                && short_of_upright
+                && envelope.cuts(
+                    points,
+                    cluster.iter().flat_map(|&v| grid.points_of(v)).copied(),
+                    cfg.fov_edge_margin_deg,
+                )
+            {
+                s = 0.0;
             }
             if s >= cfg.min_score {
                 let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;

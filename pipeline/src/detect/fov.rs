@@ -1,0 +1,120 @@
+//! Where the sensor's field of view ends above, learned from the window itself: a cluster whose
+//! top rows lie on that edge has been cut by it (a wall end or door jamb a metre from the robot
+//! looks like a seated person 1.1 m tall), so its height is where the view ends.
+
+use super::WindowPoint;
+use nalgebra::{Isometry3, Point3};
+
+/// Azimuth bins of the envelope, deg.
+const BIN_DEG: f64 = 2.0;
+const BINS: usize = (360.0 / BIN_DEG) as usize;
+/// Only points fired this close to the window's stamp: the sensor moves over the window, and
+/// its pose at the stamp would smear near points' angles by degrees.
+const RECENT_NS: u64 = 100_000_000;
+/// Every this many recent points build the envelope (thousands remain; the edge is dense).
+const STRIDE: usize = 4;
+/// A cluster is cut when at least this many of its recent points, and this share of them, lie
+/// on the edge.
+const MIN_EDGE_POINTS: usize = 10;
+const MIN_EDGE_SHARE: f64 = 0.02;
+
+/// The highest elevation seen per azimuth in the sensor's frame at the window's stamp.
+pub struct FovEnvelope {
+    sensor_t_world: Isometry3<f64>,
+    max_elevation_deg: [f64; BINS],
+    from_ns: u64,
+}
+
+impl FovEnvelope {
+    pub fn new(points: &[WindowPoint], world_t_sensor: &Isometry3<f64>, stamp_ns: u64) -> Self {
+        let mut env = Self {
+            sensor_t_world: world_t_sensor.inverse(),
+            max_elevation_deg: [f64::NEG_INFINITY; BINS],
+            from_ns: stamp_ns.saturating_sub(RECENT_NS),
+        };
+        for p in points.iter().filter(|p| p.t_ns >= env.from_ns).step_by(STRIDE) {
+            if let Some((bin, el)) = env.angles(p) {
+                if let Some(m) = env.max_elevation_deg.get_mut(bin) {
+                    *m = m.max(el);
+                }
+            }
+        }
+        env
+    }
+
+    /// Azimuth bin and elevation (deg) of a point in the sensor's frame.
+    fn angles(&self, p: &WindowPoint) -> Option<(usize, f64)> {
+        let d = self.sensor_t_world.transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
+        let horizontal = d.x.hypot(d.y);
+        if !(horizontal > 1e-6 && d.z.is_finite()) {
+            return None;
+        }
+        let az = d.y.atan2(d.x).to_degrees().rem_euclid(360.0);
+        let bin = ((az / BIN_DEG) as usize).min(BINS - 1);
+        Some((bin, d.z.atan2(horizontal).to_degrees()))
+    }
+
+    /// Whether the cluster made of `indices` (into `points`) reaches the upper edge of the field
+    /// of view within `margin_deg` (never with a margin of 0).
+    pub fn cuts(&self, points: &[WindowPoint], indices: impl Iterator<Item = u32>, margin_deg: f64) -> bool {
+        if margin_deg <= 0.0 {
+            return false;
+        }
+        let (mut recent, mut on_edge) = (0usize, 0usize);
+        for p in indices.filter_map(|i| points.get(i as usize)).filter(|p| p.t_ns >= self.from_ns) {
+            recent += 1;
+            let Some((bin, el)) = self.angles(p) else { continue };
+            if self.max_elevation_deg.get(bin).is_some_and(|m| el >= m - margin_deg) {
+                on_edge += 1;
+            }
+        }
+        on_edge >= MIN_EDGE_POINTS && on_edge as f64 >= MIN_EDGE_SHARE * recent as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pt(x: f64, y: f64, z: f64) -> WindowPoint {
+        WindowPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns: 1_000 }
+    }
+
+    /// A sensor at 0.45 m whose view ends 36 deg above the horizon: a wall 5 m ahead seen up to
+    /// that edge everywhere, a post 1 m ahead cut by it, a person-sized post 4 m ahead not.
+    #[test]
+    fn a_near_post_is_cut_and_a_far_one_is_not() {
+        let tan = 36f64.to_radians().tan();
+        let sensor = Isometry3::translation(0.0, 0.0, 0.45);
+        let mut points = Vec::new();
+        for k in 0..400 {
+            let y = -3.0 + 6.0 * f64::from(k) / 400.0;
+            for j in 0..=20 {
+                points.push(pt(5.0, y, 0.45 + 5.0 * tan * f64::from(j) / 20.0));
+            }
+        }
+        let mut post = |x: f64, y0: f64, z0: f64, z1: f64| -> Vec<u32> {
+            let mut idx = Vec::new();
+            for j in 0..=40 {
+                for k in 0..5 {
+                    points.push(pt(x, y0 + 0.05 * f64::from(k), z0 + (z1 - z0) * f64::from(j) / 40.0));
+                    idx.push((points.len() - 1) as u32);
+                }
+            }
+            idx
+        };
+        let near = post(1.0, -0.1, 0.45, 0.45 + tan);
+        let far = post(4.0, 1.0, 0.1, 1.7);
+        let env = FovEnvelope::new(&points, &sensor, 1_000);
+        assert!(env.cuts(&points, near.iter().copied(), 2.0));
+        assert!(!env.cuts(&points, far.iter().copied(), 2.0));
+        assert!(!env.cuts(&points, near.iter().copied(), 0.0), "a margin of 0 turns the check off");
+    }
+
+    #[test]
+    fn degenerate_points_do_not_panic() {
+        let points = vec![pt(0.0, 0.0, 0.45), pt(f64::NAN, 1.0, 1.0), pt(1e30, -1e30, 1e30)];
+        let env = FovEnvelope::new(&points, &Isometry3::translation(0.0, 0.0, 0.45), 1_000);
+        assert!(!env.cuts(&points, 0..5, 2.0));
+    }
+}
