@@ -215,6 +215,36 @@ mod tests {
     }
 
     #[test]
+    fn loopback_configs_load_and_stay_on_loopback() {
+        // config/loopback/: the nodes as separate processes on a `starc sim lab` run (docs/nodes.md).
+        let path = shipped("loopback/robot.toml");
+        let mut robot: RobotNodeConfig = load(&path).unwrap();
+        robot.resolve_paths(&path);
+        let path = shipped("loopback/fpv.toml");
+        let mut fpv: FpvNodeConfig = load(&path).unwrap();
+        fpv.resolve_paths(&path);
+        // The mocks' addresses of `starc sim`, each node listening for its own mock's broadcasts.
+        assert_eq!(robot.lidar_ip, Some(Ipv4Addr::new(127, 0, 7, 1)));
+        assert_eq!(fpv.lidar_ip, Some(Ipv4Addr::new(127, 0, 7, 2)));
+        for d in [&robot.livox, &fpv.livox] {
+            assert!(d.host_ip.is_loopback());
+            assert!(d.broadcast_listen.is_some_and(|a| a.ip().is_loopback()));
+        }
+        assert_ne!(robot.livox.broadcast_listen, fpv.livox.broadcast_listen);
+        assert_ne!(robot.livox.data_port, fpv.livox.data_port);
+        assert_ne!(robot.livox.cmd_port, fpv.livox.cmd_port);
+        // The rig connects where the robot listens, on loopback, without multicast scouting.
+        assert!(!robot.link.multicast_scouting && !fpv.link.multicast_scouting);
+        assert_eq!(robot.link.listen, fpv.link.connect);
+        assert!(robot.link.listen.iter().all(|e| e.starts_with("tcp/127.0.0.1:")), "{:?}", robot.link.listen);
+        // The lab's camera looks along the LiDAR's x, as the shipped rig's does.
+        let t = fpv.camera.lidar_t_camera().unwrap();
+        assert!((t.rotation * nalgebra::Vector3::z() - nalgebra::Vector3::x()).norm() < 1e-9);
+        assert!(fpv.expected_start.is_some() && fpv.shared_lidar_clock);
+        assert!(robot.record.is_none() && fpv.record.is_none() && fpv.view.http_bind.is_none());
+    }
+
+    #[test]
     fn unknown_keys_and_bad_quaternions_are_errors() {
         let dir = tempfile::tempdir().unwrap();
         let bad = dir.path().join("robot.toml");

@@ -78,6 +78,8 @@ impl FromStr for SourceConfig {
 /// ip = "127.0.0.2"
 /// broadcast_to = "127.0.0.1:55000"
 /// source = "synthetic"            # or source = { capture = "run.pcapng" }
+/// # capture_device = "192.168.1.101"  # a capture: only this device's packets
+/// # recorded_time = true              # a capture: each packet at its recorded stamp (needs epoch_ns)
 /// return_mode = "dual"
 /// time_source = "ptp"
 /// seed = 7
@@ -100,6 +102,14 @@ pub struct MockAviaConfig {
     /// At most 16 characters; derived from the ip when absent ("STARCMOCK000002" for 127.0.0.2).
     pub broadcast_code: Option<String>,
     pub source: SourceConfig,
+    /// With a capture source: replay only the packets of the device at this address (a
+    /// capture of several devices); absent: the first device seen.
+    pub capture_device: Option<Ipv4Addr>,
+    /// With a capture source: play every packet at its recorded stamp, once, no looping
+    /// ([`CaptureSource::at_recorded_time`] with `epoch_ns`, which must be set): a packet stamped
+    /// `s` leaves `s - epoch_ns` after the mock starts and carries `s` (PTP or GPS time stamps),
+    /// so mocks replaying the devices of one capture keep their recorded relative timing.
+    pub recorded_time: bool,
     /// Seed of the synthetic scene and of the faults.
     pub seed: u64,
     pub return_mode: ReturnSetting,
@@ -123,6 +133,8 @@ impl Default for MockAviaConfig {
             broadcast_to: SocketAddrV4::new(Ipv4Addr::LOCALHOST, HOST_BROADCAST_PORT),
             broadcast_code: None,
             source: SourceConfig::Synthetic,
+            capture_device: None,
+            recorded_time: false,
             seed: 0,
             return_mode: ReturnSetting::Single,
             spherical: false,
@@ -162,6 +174,25 @@ impl MockAviaConfig {
         if !(100..=20_000).contains(&self.tick_us) {
             return Err(HilError::config("tick_us", format!("{} is outside 100..=20000", self.tick_us)));
         }
+        if self.source == SourceConfig::Synthetic {
+            if let Some(ip) = self.capture_device {
+                return Err(HilError::config("capture_device", format!("{ip}: needs a capture source")));
+            }
+            if self.recorded_time {
+                return Err(HilError::config("recorded_time", "needs a capture source"));
+            }
+        }
+        if self.recorded_time {
+            if self.epoch_ns.is_none() {
+                return Err(HilError::config("recorded_time", "needs epoch_ns (the PTP time at the mock's start)"));
+            }
+            if !matches!(self.time_source, TimeSource::Ptp | TimeSource::Gps) {
+                return Err(HilError::config(
+                    "recorded_time",
+                    format!("needs time_source ptp or gps to carry the recorded stamps, not {}", self.time_source),
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -185,11 +216,21 @@ impl MockAviaConfig {
         })
     }
 
-    /// The source the config names.
+    /// The source the config names (a capture with its `capture_device` and `recorded_time`).
     pub fn open_source(&self) -> Result<Box<dyn PointSource>> {
+        self.validate()?;
         Ok(match &self.source {
             SourceConfig::Synthetic => Box::new(SyntheticScene::new(self.seed)),
-            SourceConfig::Capture(path) => Box::new(CaptureSource::open(path)?),
+            SourceConfig::Capture(path) => {
+                let mut capture = CaptureSource::open(path)?;
+                if let Some(ip) = self.capture_device {
+                    capture = capture.for_device(ip);
+                }
+                if let (true, Some(epoch)) = (self.recorded_time, self.epoch_ns) {
+                    capture = capture.at_recorded_time(epoch);
+                }
+                Box::new(capture)
+            }
         })
     }
 }
