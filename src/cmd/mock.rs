@@ -407,6 +407,10 @@ mod tests {
         let first_rig_points = rig.iter().find(|p| p.kind == starc_hil::avia::PacketKind::Points).unwrap();
         let want = robot_epoch + 5_000_000 + first_rig_points.device_ns - epoch;
         assert_eq!(source.next_firing_ns(0), want);
+        // Its first IMU sample too: the robot's, read ahead when the capture was opened, is not
+        // played by the rig's mock.
+        let first_rig_imu = rig.iter().find(|p| p.kind == starc_hil::avia::PacketKind::Imu).unwrap();
+        assert_eq!(source.next_imu_ns(0), robot_epoch + 5_000_000 + first_rig_imu.device_ns - epoch);
     }
 
     #[test]

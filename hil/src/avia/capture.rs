@@ -132,7 +132,19 @@ impl CaptureSource {
     }
 
     fn with(origin: Origin, capture: Capture) -> Result<Self> {
-        let mut s = Self {
+        let mut probe = Self::blank(origin, capture);
+        if !probe.read_more() {
+            return Err(HilError::EmptyCapture { path: Self::path(&probe.origin), reason: "no Livox data packets" });
+        }
+        // The probe only proved the capture holds data. Start over, so that `for_device` and
+        // `at_recorded_time`, given after opening, apply to the first packet too (else it went
+        // out at once, whichever device it came from).
+        let capture = Self::reopen(&probe.origin)?;
+        Ok(Self::blank(probe.origin, capture))
+    }
+
+    fn blank(origin: Origin, capture: Capture) -> Self {
+        Self {
             origin,
             capture,
             device: None,
@@ -156,11 +168,7 @@ impl CaptureSource {
             last_imu: AT_REST,
             recorded_epoch_ns: None,
             points: Vec::new(),
-        };
-        if !s.read_more() {
-            return Err(HilError::EmptyCapture { path: Self::path(&s.origin), reason: "no Livox data packets" });
         }
-        Ok(s)
     }
 
     /// Replays only the device at `ip` (by default, the first device seen).
