@@ -32,6 +32,9 @@ const FPV_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 2);
 const LEAD_NS: u64 = 2_500_000_000;
 /// Time after the recording's end for the nodes to finish their last scans.
 const TAIL: Duration = Duration::from_millis(1500);
+/// How long the rig keeps listening after the robot has stopped (the link takes well under 1 ms
+/// on loopback; this leaves room for a loaded machine).
+const RIG_DRAIN: Duration = Duration::from_millis(300);
 
 pub struct LiveOptions {
     pub out: PathBuf,
@@ -166,12 +169,13 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         mocks.push(mocks_rt.block_on(MockAvia::spawn_with_source(cfg, Box::new(source)))?);
     }
 
-    let (stop_tx, stop_rx) = watch::channel(false);
+    // The robot stops first and the rig a moment later, so that what the robot sent last still
+    // arrives (with one signal for both, its last detection sometimes met a rig already gone).
+    let (robot_stop_tx, robot_stop) = watch::channel(false);
+    let (fpv_stop_tx, fpv_stop) = watch::channel(false);
     let (robot_tx, mut robot_rx) = mpsc::unbounded_channel();
     let (fpv_tx, mut fpv_rx) = mpsc::unbounded_channel();
-    let robot_stop = stop_rx.clone();
     let robot = spawn_node("robot-node", move || robot::run(robot_cfg, robot_stop, Some(robot_tx)))?;
-    let fpv_stop = stop_rx.clone();
     let fpv = spawn_node("fpv-node", move || fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx)))?;
 
     let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
@@ -241,8 +245,10 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
-    let _ = stop_tx.send(true);
+    let _ = robot_stop_tx.send(true);
     let robot_summary = robot.join().map_err(|_| anyhow::anyhow!("the robot node panicked"))?;
+    std::thread::sleep(RIG_DRAIN);
+    let _ = fpv_stop_tx.send(true);
     let fpv_summary = fpv.join().map_err(|_| anyhow::anyhow!("the rig node panicked"))?;
     for m in mocks.drain(..) {
         let _ = mocks_rt.block_on(m.stop());
