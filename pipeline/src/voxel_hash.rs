@@ -18,7 +18,9 @@ impl Hasher for VoxelHasher {
     fn write(&mut self, bytes: &[u8]) {
         let mut words = bytes.chunks_exact(4);
         for w in &mut words {
-            self.add(u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])));
+            if let Ok(word) = <[u8; 4]>::try_from(w) {
+                self.add(u64::from(u32::from_le_bytes(word)));
+            }
         }
         for b in words.remainder() {
             self.add(u64::from(*b));

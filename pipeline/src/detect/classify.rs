@@ -27,6 +27,12 @@ const MIN_LENGTH_M: f64 = 0.2;
 const MIN_WIDTH_M: f64 = 0.18;
 const MIN_WIDTH_FEW_POINTS_M: f64 = 0.1;
 
+/// How far past each posture's height range its gate falls to 0.
+const UPRIGHT_HEIGHT_SOFT_M: f64 = 0.15;
+const LOW_HEIGHT_SOFT_M: f64 = 0.1;
+const UPPER_HEIGHT_SOFT_M: f64 = 0.05;
+const LYING_HEIGHT_SOFT_M: f64 = 0.05;
+
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
@@ -42,26 +48,26 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
     let not_flat = band(f.planarity, 0.0, cfg.max_planarity, 0.05);
     let upright = thick
         * not_flat
-        * band(height, cfg.upright_height_m[0], cfg.upright_height_m[1], 0.15)
+        * band(height, cfg.upright_height_m[0], cfg.upright_height_m[1], UPRIGHT_HEIGHT_SOFT_M)
         * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
         * band(width, min_width, 0.9, 0.03)
         // Feet near the floor or a stage, never a body hanging in the air.
         * band(f.bottom_m, f64::MIN, 0.5_f64.max(cfg.max_bottom_m - 0.4), 0.2);
     let low = thick
         * not_flat
-        * band(height, cfg.low_height_m[0], cfg.low_height_m[1], 0.1)
+        * band(height, cfg.low_height_m[0], cfg.low_height_m[1], LOW_HEIGHT_SOFT_M)
         * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
         * band(width, min_width, 0.9, 0.03)
         * band(f.bottom_m, f64::MIN, cfg.max_bottom_m, 0.2);
     // Head and shoulders above a table, a seat back or a stage edge: nothing else floats.
     let upper = thick
-        * band(height, cfg.upper_body_height_m[0], cfg.upper_body_height_m[1], 0.05)
+        * band(height, cfg.upper_body_height_m[0], cfg.upper_body_height_m[1], UPPER_HEIGHT_SOFT_M)
         * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
         * band(f.bottom_m, 0.45, f64::MAX, 0.1)
         * band(length, MIN_LENGTH_M, 0.8, 0.1)
         * band(width, min_width, 0.7, 0.03);
     let lying = not_flat
-        * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], 0.05)
+        * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], LYING_HEIGHT_SOFT_M)
         * band(length, cfg.lying_length_m[0], cfg.lying_length_m[1], 0.15)
         * band(width, 0.15, cfg.lying_max_width_m, 0.1)
         * band(f.bottom_m, f64::MIN, 0.3, 0.1);
@@ -76,10 +82,10 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
 /// A cluster at least this tall scores 0 in every posture (each height gate's upper edge plus
 /// its soft margin, as in [`score`]) and is [`too_big`].
 pub fn tallest_scorable_m(cfg: &DetectConfig) -> f64 {
-    (cfg.upright_height_m[1] + 0.15)
-        .max(cfg.low_height_m[1] + 0.1)
-        .max(cfg.upper_body_height_m[1] + 0.05)
-        .max(cfg.lying_height_m[1] + 0.05)
+    (cfg.upright_height_m[1] + UPRIGHT_HEIGHT_SOFT_M)
+        .max(cfg.low_height_m[1] + LOW_HEIGHT_SOFT_M)
+        .max(cfg.upper_body_height_m[1] + UPPER_HEIGHT_SOFT_M)
+        .max(cfg.lying_height_m[1] + LYING_HEIGHT_SOFT_M)
 }
 
 /// Whether a cluster is bigger than any person, so that splitting it may find one.

@@ -73,6 +73,11 @@ impl Grid {
     }
 
     /// The window indices of the points in voxel `v`.
+    /// The points (indices into the window) of every voxel of `cluster`.
+    pub fn points_of_cluster<'a>(&'a self, cluster: &'a [u32]) -> impl Iterator<Item = u32> + 'a {
+        cluster.iter().flat_map(|&v| self.points_of(v)).copied()
+    }
+
     pub fn points_of(&self, v: u32) -> &[u32] {
         let (a, b) = (self.offsets.get(v as usize), self.offsets.get(v as usize + 1));
         match (a, b) {

@@ -76,7 +76,7 @@ pub fn features(
     if centres.is_empty() {
         return None;
     }
-    let raw: Vec<Vector3<f64>> = cluster.iter().flat_map(|&v| grid.points_of(v)).filter_map(|&i| points(i)).collect();
+    let raw: Vec<Vector3<f64>> = grid.points_of_cluster(cluster).filter_map(points).collect();
     if raw.is_empty() {
         return None;
     }

@@ -93,7 +93,8 @@ impl Detector for GeometricDetector {
             }
         }
         let grid = Grid::new(&self.kept, cfg.voxel_m);
-        let envelope = FovEnvelope::new(window.points, &window.sensor_pose, window.stamp.ns);
+        // Built for the first candidate that needs it (most windows have none).
+        let mut envelope: Option<FovEnvelope> = None;
         let all: Vec<u32> = (0..grid.voxels.len() as u32).collect();
         let points = window.points;
         let lookup = |i: u32| {
@@ -132,22 +133,18 @@ impl Detector for GeometricDetector {
                 s = 0.0;
             }
             if self.keep_cluster_points {
-                self.last_cluster_points.push(cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect());
+                self.last_cluster_points.push(grid.points_of_cluster(&cluster).collect());
             }
             // Cut by the top of the field of view, its height is the view's: only a cluster
             // already as tall as a standing person can be one (checked for candidates only: it
             // costs a transform per point).
             let short_of_upright = pose != PersonPose::Upright || f.size.z < cfg.upright_height_m[0];
-            if s >= cfg.min_score
-                && pose != PersonPose::Lying
-                && short_of_upright
-                && envelope.cuts(
-                    points,
-                    cluster.iter().flat_map(|&v| grid.points_of(v)).copied(),
-                    cfg.fov_edge_margin_deg,
-                )
-            {
-                s = 0.0;
+            if s >= cfg.min_score && pose != PersonPose::Lying && short_of_upright && cfg.fov_edge_margin_deg > 0.0 {
+                let env =
+                    envelope.get_or_insert_with(|| FovEnvelope::new(points, &window.sensor_pose, window.stamp.ns));
+                if env.cuts(points, grid.points_of_cluster(&cluster), cfg.fov_edge_margin_deg) {
+                    s = 0.0;
+                }
             }
             if s >= cfg.min_score {
                 let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;
@@ -155,7 +152,7 @@ impl Detector for GeometricDetector {
                 let cx = f.centre.x;
                 let cy = f.centre.y;
                 let cz = floor.a * cx + floor.b * cy + floor.c + bottom + height / 2.0;
-                let mut idx: Vec<u32> = cluster.iter().flat_map(|&v| grid.points_of(v)).copied().collect();
+                let mut idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
                 idx.sort_unstable();
                 out.push(Detection {
                     stamp: window.stamp,

@@ -2,6 +2,7 @@
 //! [`LioFile::to_config`] turns them into the [`LioConfig`] the filter runs with.
 
 use super::health::HealthConfig;
+use super::init::{DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::odometry::LioConfig;
 use super::propagate::ImuNoise;
 use super::update::UpdateConfig;
@@ -47,8 +48,8 @@ impl Default for ImuSection {
             source: ImuSource::Internal,
             time_offset_ns: 0,
             init_window_s: 1.0,
-            init_max_gyro_std_rad_s: 0.06,
-            init_max_acc_std_m_s2: 0.2,
+            init_max_gyro_std_rad_s: DEFAULT_MAX_GYRO_STD_RAD_S,
+            init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             gyro_noise_rad_s: noise.gyro_rad_s,
             acc_noise_m_s2: noise.acc_m_s2,
             gyro_bias_walk: noise.gyro_bias_walk,

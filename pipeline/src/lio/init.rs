@@ -29,6 +29,11 @@ pub struct InitResult {
     pub end_ns: u64,
 }
 
+/// Largest gyro and accelerometer spreads (standard deviations) of a still start, by default: a
+/// rig held in hand sways a degree or two (about 0.04 rad/s) and counts; walking does not.
+pub const DEFAULT_MAX_GYRO_STD_RAD_S: f64 = 0.06;
+pub const DEFAULT_MAX_ACC_STD_M_S2: f64 = 0.2;
+
 /// Gathers the first `window_ns` of IMU data and checks it was static.
 #[derive(Clone, Debug)]
 pub struct StaticInit {
@@ -42,7 +47,7 @@ pub struct StaticInit {
 
 impl StaticInit {
     pub fn new(window_ns: u64) -> Self {
-        Self::with_limits(window_ns, 0.06, 0.2)
+        Self::with_limits(window_ns, DEFAULT_MAX_GYRO_STD_RAD_S, DEFAULT_MAX_ACC_STD_M_S2)
     }
 
     /// A window that counts as still while the gyro and accelerometer spreads (standard

@@ -2,7 +2,7 @@
 
 use super::deskew::deskew;
 use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit};
-use super::init::{InitResult, InitStatus, StaticInit};
+use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::ivox::VoxelMap;
 use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
@@ -11,6 +11,7 @@ use super::update::{update, UpdateConfig, UpdateReport};
 use crate::voxel_hash::VoxelHashMap;
 use nalgebra::{Isometry3, Rotation3, Vector3};
 use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -43,8 +44,8 @@ impl Default for LioConfig {
             rot_imu_lidar: Rotation3::identity(),
             pos_imu_lidar: Vector3::new(0.04165, 0.02326, -0.0284),
             init_window_ns: 1_000_000_000,
-            init_max_gyro_std_rad_s: 0.06,
-            init_max_acc_std_m_s2: 0.2,
+            init_max_gyro_std_rad_s: DEFAULT_MAX_GYRO_STD_RAD_S,
+            init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
@@ -98,7 +99,7 @@ pub struct Lio {
     /// The newest IMU stamp seen, and the IMU's sample period (a running mean).
     last_imu_ns: u64,
     imu_period_ns: f64,
-    scans: VecDeque<LioScan>,
+    scans: VecDeque<Arc<LioScan>>,
     map: VoxelMap,
     monitor: HealthMonitor,
     /// Scans whose update was applied.
@@ -179,8 +180,10 @@ impl Lio {
         self.drain(out);
     }
 
-    /// Feeds one scan; it is processed once the IMU has passed its end.
-    pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<ScanOutput>) {
+    /// Feeds one scan; it is processed once the IMU has passed its end. A shared scan is kept
+    /// as is (the mission's cores also place it), not copied.
+    pub fn push_scan(&mut self, scan: impl Into<Arc<LioScan>>, out: &mut Vec<ScanOutput>) {
+        let scan = scan.into();
         if self.status != LioStatus::Running || scan.end_ns <= self.state_ns {
             return;
         }

@@ -247,10 +247,10 @@ impl RigCore {
     }
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<ScanOutput>) {
-        let shared = Arc::new(scan.clone());
+        let shared = Arc::new(scan);
         self.placer.pending(Arc::clone(&shared));
-        self.scans.push_back(shared);
-        self.lio.push_scan(scan, &mut self.outs);
+        self.scans.push_back(Arc::clone(&shared));
+        self.lio.push_scan(shared, &mut self.outs);
         self.drain(out);
     }
 

@@ -12,6 +12,7 @@ use crate::PipelineError;
 use nalgebra::Vector3;
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// How the robot's side runs; the defaults are what `starc sim` measures.
@@ -77,14 +78,13 @@ pub struct RobotCore {
     lio: Lio,
     placer: ScanPlacer,
     detector: GeometricDetector,
-    window: VecDeque<Vec<WindowPoint>>,
-    /// Placed scans not yet in the map: they go in when the map is next asked for, so that
-    /// growing the map never delays a detection.
-    unmapped: Vec<Vec<WindowPoint>>,
+    window: VecDeque<Arc<Vec<WindowPoint>>>,
+    /// Placed scans not yet in the map (shared with the window): they go in when the map is
+    /// next asked for, so that growing the map never delays a detection.
+    unmapped: Vec<Arc<Vec<WindowPoint>>>,
     /// Occupied voxels of the map, and each tile's points (one per voxel).
     voxels: VoxelHashSet<VoxelKey>,
     tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
-    map_len: usize,
     dirty_tiles: VoxelHashSet<VoxelKey>,
     tile_version: u32,
     outs: Vec<ScanOutput>,
@@ -106,7 +106,6 @@ impl RobotCore {
             unmapped: Vec::new(),
             voxels: VoxelHashSet::default(),
             tiles: VoxelHashMap::default(),
-            map_len: 0,
             dirty_tiles: VoxelHashSet::default(),
             tile_version: 0,
             outs: Vec::new(),
@@ -120,16 +119,17 @@ impl RobotCore {
     }
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<RobotStep>) {
-        self.placer.pending(std::sync::Arc::new(scan.clone()));
-        self.lio.push_scan(scan, &mut self.outs);
+        let shared = Arc::new(scan);
+        self.placer.pending(Arc::clone(&shared));
+        self.lio.push_scan(shared, &mut self.outs);
         self.drain(out);
     }
 
     fn drain(&mut self, out: &mut Vec<RobotStep>) {
         let outs = std::mem::take(&mut self.outs);
         for o in outs {
-            let placed = self.placer.place(&o);
-            self.unmapped.push(placed.clone());
+            let placed = Arc::new(self.placer.place(&o));
+            self.unmapped.push(Arc::clone(&placed));
             self.window.push_back(placed);
             if self.window.len() > self.cfg.detect_scans {
                 self.window.pop_front();
@@ -142,14 +142,13 @@ impl RobotCore {
     fn flush_map(&mut self) {
         let per_tile = self.voxels_per_tile();
         for placed in std::mem::take(&mut self.unmapped) {
-            for p in &placed {
+            for p in placed.iter() {
                 let v = p.xyz() / self.cfg.map_voxel_m;
                 let key = (v.x.floor() as i32, v.y.floor() as i32, v.z.floor() as i32);
                 if self.voxels.insert(key) {
                     let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
                     self.tiles.entry(tile).or_default().push(p.xyz());
                     self.dirty_tiles.insert(tile);
-                    self.map_len += 1;
                 }
             }
         }
@@ -160,7 +159,7 @@ impl RobotCore {
     }
 
     fn detect(&mut self, o: &ScanOutput) -> RobotDetection {
-        let points: Vec<WindowPoint> = self.window.iter().flatten().copied().collect();
+        let points: Vec<WindowPoint> = self.window.iter().flat_map(|s| s.iter()).copied().collect();
         let t0 = Instant::now();
         let w = DetectWindow { stamp: Stamp::new(o.end_ns, Clock::Ptp), sensor_pose: o.lidar_pose, points: &points };
         let mut found = Vec::new();
@@ -194,7 +193,7 @@ impl RobotCore {
 
     pub fn map_len(&mut self) -> usize {
         self.flush_map();
-        self.map_len
+        self.voxels.len()
     }
 
     /// The map tiles changed since the last call, encoded (see [`crate::align::tiles`]); every
