@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use starc_pipeline::align::{pose_error, AlignConfig};
+use starc_pipeline::align::{pose_error, AlignConfig, AlignMetrics};
 use starc_pipeline::lio::{ImuSample, LioScan};
 use starc_pipeline::mission::{RigCore, RigCoreConfig, RobotCore, RobotCoreConfig};
 use std::net::Ipv4Addr;
@@ -107,16 +107,13 @@ fn main() {
                 let off_now = (w.translation.vector - hint.translation.vector).norm();
                 let off_start = (start_of(&w).translation.vector - hint.translation.vector).norm();
                 println!(
-                    "  att{i} seed {:+4.0} deg [{:+.1},{:+.1}]: err {:6.2} m {:6.1} deg | rms {:.4} inl {:.3} upd {:.1e} deg {:.2e} | gate now {:5.2} start {:5.2} | acc {} {}",
+                    "  att{i} seed {:+4.0} deg [{:+.1},{:+.1}]: err {:6.2} m {:6.1} deg | {} | gate now {:5.2} start {:5.2} | acc {} {}",
                     a.seed_yaw_offset_deg,
                     a.seed_shift_m[0],
                     a.seed_shift_m[1],
                     em,
                     ed,
-                    m.rms_residual_m,
-                    m.inlier_ratio,
-                    m.update_norm,
-                    m.degeneracy_index,
+                    fit(m),
                     off_now,
                     off_start,
                     a.accepted,
@@ -165,13 +162,10 @@ fn main() {
                 let (em, ed) = pose_error(&w, &truth);
                 let m = &a.metrics;
                 println!(
-                    "  from truth: settles {:.3} m {:.2} deg | rms {:.4} inl {:.3} upd {:.1e} deg {:.2e} hops {} | acc {} {}",
+                    "  from truth: settles {:.3} m {:.2} deg | {} hops {} | acc {} {}",
                     em,
                     ed,
-                    m.rms_residual_m,
-                    m.inlier_ratio,
-                    m.update_norm,
-                    m.degeneracy_index,
+                    fit(m),
                     a.verify_hops,
                     a.accepted,
                     a.rejected_because.join("; ")
@@ -182,4 +176,12 @@ fn main() {
             println!("  verdict {verdict:?} (chosen {chosen_m:.2} m {chosen_deg:.1} deg off truth)");
         }
     }
+}
+
+/// An attempt's fit: RMS residual, inlier ratio, last update, degeneracy index.
+fn fit(m: &AlignMetrics) -> String {
+    format!(
+        "rms {:.4} inl {:.3} upd {:.1e} deg {:.2e}",
+        m.rms_residual_m, m.inlier_ratio, m.update_norm, m.degeneracy_index
+    )
 }

@@ -20,9 +20,9 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// With `--recorded-time` and no `--start-at-unix-ns`: time to discover and set up the mock
-/// before the capture starts playing (as `starc sim` leaves).
-const DEFAULT_LEAD_NS: u64 = 2_500_000_000;
+/// Recorded-time playback starts this long after the mocks (with `--recorded-time` and no
+/// `--start-at-unix-ns`, and in `starc sim`): time to discover and set up the devices.
+pub(crate) const PLAYBACK_LEAD_NS: u64 = 2_500_000_000;
 /// A `--start-at-unix-ns` farther from now than this is a mistake (seconds or ms, not ns).
 const MAX_START_OFFSET_NS: u64 = 3600 * 1_000_000_000;
 
@@ -167,7 +167,7 @@ impl AviaArgs {
             let first_ns = capture_start_ns(path, c.capture_device)?;
             if c.recorded_time && (self.start_at_unix_ns.is_some() || c.epoch_ns.is_none()) {
                 let now_ns = Stamp::host_now().ns;
-                let start_at_ns = self.start_at_unix_ns.unwrap_or(now_ns.saturating_add(DEFAULT_LEAD_NS));
+                let start_at_ns = self.start_at_unix_ns.unwrap_or(now_ns.saturating_add(PLAYBACK_LEAD_NS));
                 c.epoch_ns = Some(recorded_epoch_ns(first_ns, start_at_ns, now_ns)?);
                 tracing::info!(
                     "recorded time: the capture's first packet (stamp {first_ns} ns) plays in {:.3} s",
@@ -182,7 +182,7 @@ impl AviaArgs {
 
 /// The stamp of the capture's first data packet (any device): where recorded-time playback
 /// starts. With `device`, also checks that it sends data packets in the capture.
-fn capture_start_ns(path: &Path, device: Option<Ipv4Addr>) -> anyhow::Result<u64> {
+pub(crate) fn capture_start_ns(path: &Path, device: Option<Ipv4Addr>) -> anyhow::Result<u64> {
     let mut first_ns = None;
     let mut found = device.is_none();
     let mut others = BTreeSet::new();
@@ -435,6 +435,6 @@ mod tests {
         // Without a start time, playback starts 2.5 s from now.
         let c = args(&["--source", path_arg, "--recorded-time"]).unwrap();
         let lead = 1_767_225_600 * S as i128 - c.epoch_ns.unwrap() as i128;
-        assert!((lead - DEFAULT_LEAD_NS as i128).abs() < 200_000_000, "{lead}");
+        assert!((lead - PLAYBACK_LEAD_NS as i128).abs() < 200_000_000, "{lead}");
     }
 }

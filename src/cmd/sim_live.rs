@@ -15,8 +15,6 @@ use nalgebra::{Isometry3, UnitQuaternion};
 use starc_hil::avia::{CaptureSource, MockAvia, MockAviaConfig};
 use starc_hil::sim::truth::tum_line;
 use starc_link::LinkConfig;
-use starc_livox::capture;
-use starc_livox::data::DataPacket;
 use starc_livox::live::DriverConfig;
 use starc_pipeline::mission::AlignVerdict;
 use std::io::Write as _;
@@ -28,8 +26,6 @@ use tokio::sync::{mpsc, watch};
 /// The mocks' addresses on loopback (the nodes find them by their broadcasts).
 const ROBOT_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 1);
 const FPV_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 2);
-/// Time for the nodes to find and set up their devices before the recording starts playing.
-const LEAD_NS: u64 = 2_500_000_000;
 /// Time after the recording's end for the nodes to finish their last scans.
 const TAIL: Duration = Duration::from_millis(1500);
 /// How long the rig keeps listening after the robot has stopped (the link takes well under 1 ms
@@ -52,17 +48,6 @@ fn free_port_tcp() -> anyhow::Result<u16> {
 
 fn free_port_udp() -> anyhow::Result<u16> {
     Ok(std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
-}
-
-/// The first packet stamp of the capture (where playback starts).
-fn first_stamp_ns(pcap: &Path) -> anyhow::Result<u64> {
-    for d in capture::open(pcap).with_context(|| format!("opening {}", pcap.display()))? {
-        let d = d?;
-        if let Ok(p) = DataPacket::parse(&d.payload) {
-            return Ok(p.header.timestamp.ns);
-        }
-    }
-    bail!("{}: no Livox data packet", pcap.display())
 }
 
 fn driver(broadcast_port: u16) -> anyhow::Result<DriverConfig> {
@@ -105,7 +90,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     std::fs::create_dir_all(opts.out.join("ar")).with_context(|| format!("creating {}", opts.out.display()))?;
     let mut score = Scorer::new(Truth::load(dir)?);
     let pcap = dir.join("avia.pcap");
-    let s0 = first_stamp_ns(&pcap)?;
+    let s0 = super::mock::capture_start_ns(&pcap, None)?;
     let end_ns =
         [&score.truth.gt_robot, &score.truth.gt_fpv].iter().filter_map(|t| t.last().map(|l| l.0)).max().unwrap_or(s0);
     let camera = score.truth.mount.camera.clone();
@@ -153,9 +138,9 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     };
     let schedule: Vec<(u64, u64)> = score.truth.frames.iter().map(|f| (f.index, f.t_ns)).collect();
 
-    // The mocks, on their own runtime: playback starts LEAD after now, at the first stamp.
+    // The mocks, on their own runtime: playback starts PLAYBACK_LEAD_NS after now, at the first stamp.
     let mocks_rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
-    let w0 = Instant::now() + Duration::from_nanos(LEAD_NS);
+    let w0 = Instant::now() + Duration::from_nanos(super::mock::PLAYBACK_LEAD_NS);
     let mut mocks = Vec::new();
     for (sim_ip, mock_ip, bcast) in [(ROBOT_AVIA, ROBOT_MOCK, robot_bcast), (FPV_AVIA, FPV_MOCK, fpv_bcast)] {
         let lead_left = w0.saturating_duration_since(Instant::now()).as_nanos() as u64;
