@@ -20,7 +20,7 @@
 mod align_sim;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use starc_pipeline::align::{cloud_points, pose_error, pose_from_rows, pose_rows, AlignConfig, Aligner, Vec3};
+use starc_pipeline::align::{cloud_points, pose_error, pose_from_rows, pose_rows, AlignConfig, Aligner, Ray, Vec3};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -163,26 +163,33 @@ fn run_peers(
     peers
 }
 
-fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>, config: &AlignConfig) {
+fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &Isometry3<f64>, config: &AlignConfig) {
     let verbose = std::env::var_os("STARC_ALIGN_VERBOSE").is_some();
     println!("\n## {name}: source {} points, target {} points", source.len(), target.len());
     let aligner = Aligner::new(target, config.clone()).unwrap();
     println!("target preparation {:.1} ms", aligner.prepare_ms);
     // How well the pair fits at its truth: one attempt from the truth itself.
     let single = Aligner::new(target, AlignConfig { reseed_yaw_step_deg: 0.0, ..config.clone() }).unwrap();
-    let r = single.align(source, truth);
+    let r = single.align_with_rays(source, rays, truth);
     if let Some(a) = r.best() {
         let (e_m, e_deg) = pose_error(&r.pose, truth);
         println!(
-            "from the truth: accepted {}, moved {:.2} cm {:.3} deg; rms {:.3} m, inlier ratio {:.3}, degeneracy {:.4}",
+            "from the truth: accepted {}, moved {:.2} cm {:.3} deg; rms {:.3} m, inlier ratio {:.3}, degeneracy {:.4}, rays blocked {}",
             r.accepted,
             e_m * 100.0,
             e_deg,
             a.metrics.rms_residual_m,
             a.metrics.inlier_ratio,
-            a.metrics.degeneracy_index
+            a.metrics.degeneracy_index,
+            a.free_space.as_ref().map_or("not checked".to_string(), |f| format!("{}/{}", f.blocked, f.rays))
         );
     }
+    println!("rays for the free-space check: {}", rays.len());
+    // Free-space blocked ratios of every attempt the check ran on, split by whether it was right.
+    let (mut blocked_right, mut blocked_wrong) = (Vec::new(), Vec::new());
+    let mut rejected_free_space = 0usize;
+    // Where the time goes, per trial: source reduction, seed ranking, full attempts, checks.
+    let mut split_ms: [Vec<f64>; 4] = Default::default();
     let mut starts = Vec::new();
     let mut ours = Vec::new();
     let mut attempts_hist = [0usize; 8];
@@ -196,8 +203,24 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
             let yaw = y as f64 * 15.0 - 180.0;
             let s = start(truth, k, yaw, shift);
             let c0 = thread_cpu_ms();
-            let r = aligner.align(source, &s);
+            let r = aligner.align_with_rays(source, rays, &s);
             let cpu_ms = thread_cpu_ms() - c0;
+            for a in &r.attempts {
+                let Some(f) = &a.free_space else { continue };
+                let (am, ad) = pose_error(&a.pose, truth);
+                if am < TOL_M && ad < TOL_DEG {
+                    blocked_right.push(f.blocked_ratio);
+                } else {
+                    blocked_wrong.push(f.blocked_ratio);
+                }
+            }
+            split_ms[0].push(r.source_reduce_ms);
+            split_ms[1].push(r.seed_ms);
+            split_ms[2].push(r.attempts.iter().map(|a| a.ndt_ms + a.icp_ms).sum());
+            split_ms[3].push(r.attempts.iter().map(|a| a.verify_ms).sum());
+            if r.attempts.iter().any(|a| a.rejected_because.iter().any(|w| w.starts_with("sees through"))) {
+                rejected_free_space += 1;
+            }
             let (err_m, err_deg) = pose_error(&r.pose, truth);
             let ok = r.accepted && err_m < TOL_M && err_deg < TOL_DEG;
             let close = err_m < TOL_M && err_deg < TOL_DEG;
@@ -226,7 +249,7 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
                 for a in &r.attempts {
                     let (am, ad) = pose_error(&a.pose, truth);
                     println!(
-                        "    attempt seed {:+.0} deg ({:+.1}, {:+.1}) m: {:.2} cm {:.3} deg off; icp {} it, rms {:.4}, inliers {:.3}, update {:.1e}, degeneracy {:.4}, accepted {}",
+                        "    attempt seed {:+.0} deg ({:+.1}, {:+.1}) m: {:.2} cm {:.3} deg off; icp {} it, rms {:.4}, inliers {:.3}, update {:.1e}, degeneracy {:.4}, blocked {}, accepted {}",
                         a.seed_yaw_offset_deg,
                         a.seed_shift_m[0],
                         a.seed_shift_m[1],
@@ -237,6 +260,7 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
                         a.metrics.inlier_ratio,
                         a.metrics.update_norm,
                         a.metrics.degeneracy_index,
+                        a.free_space.as_ref().map_or("-".to_string(), |f| format!("{:.3}", f.blocked_ratio)),
                         a.accepted
                     );
                     for p in &a.alternatives {
@@ -296,6 +320,26 @@ fn scenario(name: &str, source: &[Vec3], target: &[Vec3], truth: &Isometry3<f64>
             pct(&ms, 0.5)
         );
     }
+    for (what, v) in [("right", &blocked_right), ("wrong", &blocked_wrong)] {
+        let v = sorted(v.iter().copied());
+        if let (Some(lo), Some(hi)) = (v.first(), v.last()) {
+            println!(
+                "free-space check on {} {what} results: blocked ratio min {lo:.3} median {:.3} p99 {:.3} max {hi:.3}",
+                v.len(),
+                pct(&v, 0.5),
+                pct(&v, 0.99)
+            );
+        }
+    }
+    println!("trials with an attempt rejected by the free-space check: {rejected_free_space}");
+    let med = |v: &[f64]| pct(&sorted(v.iter().copied()), 0.5);
+    println!(
+        "time per trial, median ms: source reduction {:.1}, seed ranking {:.1}, NDT+ICP attempts {:.1}, checks {:.1}",
+        med(&split_ms[0]),
+        med(&split_ms[1]),
+        med(&split_ms[2]),
+        med(&split_ms[3])
+    );
     let peers = if std::env::var_os("STARC_ALIGN_NO_PEERS").is_some() {
         Vec::new()
     } else {
@@ -389,7 +433,9 @@ fn main() {
     let (source, target, truth) = real_pair();
     let real = std::env::var_os("STARC_ALIGN_NO_REAL").is_none();
     if real {
-        scenario("real pair (shared/data/registration)", &source, &target, &truth, &config);
+        // One scan from one place: every ray starts at the sensor's origin.
+        let rays: Vec<Ray> = source.iter().step_by(50).map(|p| Ray { origin: Vec3::zeros(), end: *p }).collect();
+        scenario("real pair (shared/data/registration)", &source, &rays, &target, &truth, &config);
     }
     // STARC_ALIGN_SIM: scenario:duration_s:t_end_s:window_s,... (empty: none).
     let spec = std::env::var("STARC_ALIGN_SIM").unwrap_or_else(|_| "office:30:26:12".into());
@@ -417,7 +463,7 @@ fn main() {
             p.target = m.points;
         }
         println!("\nsimulated pair: {}", p.describe);
-        scenario(&format!("simulated {}", f[0]), &p.source, &p.target, &p.truth, &config);
+        scenario(&format!("simulated {}", f[0]), &p.source, &p.rays, &p.target, &p.truth, &config);
         sims.push((f[0].to_string(), p));
     }
     if std::env::var_os("STARC_ALIGN_NO_BASIN").is_none() {

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use starc_pipeline::align::{pose_error, AlignConfig, AlignMetrics};
+use starc_pipeline::align::{pose_error, AlignConfig, Attempt};
 use starc_pipeline::lio::{ImuSample, LioScan};
 use starc_pipeline::mission::{RigCore, RigCoreConfig, RobotCore, RobotCoreConfig};
 use std::net::Ipv4Addr;
@@ -103,7 +103,6 @@ fn main() {
             for (i, a) in o.report.attempts.iter().enumerate() {
                 let w = a.pose * o.frame_t_lidar;
                 let (em, ed) = pose_error(&w, &truth);
-                let m = &a.metrics;
                 let off_now = (w.translation.vector - hint.translation.vector).norm();
                 let off_start = (start_of(&w).translation.vector - hint.translation.vector).norm();
                 println!(
@@ -113,7 +112,7 @@ fn main() {
                     a.seed_shift_m[1],
                     em,
                     ed,
-                    fit(m),
+                    fit(a),
                     off_now,
                     off_start,
                     a.accepted,
@@ -160,12 +159,11 @@ fn main() {
             if let Some(a) = t.report.attempts.first() {
                 let w = a.pose * t.frame_t_lidar;
                 let (em, ed) = pose_error(&w, &truth);
-                let m = &a.metrics;
                 println!(
                     "  from truth: settles {:.3} m {:.2} deg | {} hops {} | acc {} {}",
                     em,
                     ed,
-                    fit(m),
+                    fit(a),
                     a.verify_hops,
                     a.accepted,
                     a.rejected_because.join("; ")
@@ -178,10 +176,16 @@ fn main() {
     }
 }
 
-/// An attempt's fit: RMS residual, inlier ratio, last update, degeneracy index.
-fn fit(m: &AlignMetrics) -> String {
+/// An attempt's fit: RMS residual, inlier ratio, last update, degeneracy index, and the share
+/// of rays the free-space check found blocked ("-" where it did not run).
+fn fit(a: &Attempt) -> String {
+    let m = &a.metrics;
     format!(
-        "rms {:.4} inl {:.3} upd {:.1e} deg {:.2e}",
-        m.rms_residual_m, m.inlier_ratio, m.update_norm, m.degeneracy_index
+        "rms {:.4} inl {:.3} upd {:.1e} deg {:.2e} blk {}",
+        m.rms_residual_m,
+        m.inlier_ratio,
+        m.update_norm,
+        m.degeneracy_index,
+        a.free_space.as_ref().map_or("-".to_string(), |f| format!("{:.3}", f.blocked_ratio))
     )
 }

@@ -1,9 +1,10 @@
-//! `starc align --source FILE --target FILE [--init x,y,z,yaw_deg] [--config FILE] [--json]`:
+//! `starc align --source FILE --target FILE [--init x,y,z,yaw_deg] [--scan-origin x,y,z]
+//! [--config FILE] [--json]`:
 //! registers a source cloud against a target cloud (NDT, then trimmed point-to-plane ICP) and
 //! prints the 4x4 transform mapping source points into the target frame, with its metrics.
 
 use anyhow::Context;
-use starc_pipeline::align::{cloud_points, pose_xyz_yaw, AlignConfig, AlignReport, Aligner};
+use starc_pipeline::align::{cloud_points, pose_xyz_yaw, AlignConfig, AlignReport, Aligner, Ray, Vec3};
 use starc_pipeline::cloud;
 use std::io::Write;
 use std::path::PathBuf;
@@ -19,6 +20,10 @@ pub struct Args {
     /// Initial guess of the source pose in the target frame: x,y,z (m), yaw (deg).
     #[arg(long, value_parser = parse_init, allow_hyphen_values = true)]
     pub init: Option<[f64; 4]>,
+    /// The source is one scan taken from this point (its own frame, usually 0,0,0): the result
+    /// must also leave the scan's rays clear of the target's surfaces (the free-space check).
+    #[arg(long, value_parser = parse_xyz, allow_hyphen_values = true)]
+    pub scan_origin: Option<[f64; 3]>,
     /// TOML settings (see config/align.toml); defaults otherwise.
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -36,6 +41,19 @@ fn parse_init(s: &str) -> Result<[f64; 4], String> {
     }
 }
 
+fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> =
+        s.split(',').map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}"))).collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|a| a.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err("expected three finite numbers: x,y,z".into()),
+    }
+}
+
+/// Rays walked by the free-space check come from this many source points at most (it thins
+/// them again to `free_space_rays`).
+const MAX_RAYS: usize = 20_000;
+
 /// Exit status 0 when the alignment is accepted, 1 when rejected (the report is printed either way).
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = match &args.config {
@@ -49,7 +67,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let target = cloud_points(&cloud::read(&args.target)?);
     let aligner = Aligner::new(&target, config)?;
     let [x, y, z, yaw] = args.init.unwrap_or([0.0; 4]);
-    let report = aligner.align(&source, &pose_xyz_yaw(x, y, z, yaw));
+    let rays: Vec<Ray> = match args.scan_origin {
+        Some([ox, oy, oz]) => {
+            let origin = Vec3::new(ox, oy, oz);
+            let stride = source.len().div_ceil(MAX_RAYS).max(1);
+            source.iter().step_by(stride).map(|p| Ray { origin, end: *p }).collect()
+        }
+        None => Vec::new(),
+    };
+    let report = aligner.align_with_rays(&source, &rays, &pose_xyz_yaw(x, y, z, yaw));
     // Written (not println!) so that a closed pipe (`| head`) is an error, not a panic.
     let mut out = std::io::stdout().lock();
     if args.json {
@@ -74,6 +100,15 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
             "rms residual {:.4} m, inlier ratio {:.3}, update norm {:.2e}, degeneracy index {:.4}, {} correspondences",
             m.rms_residual_m, m.inlier_ratio, m.update_norm, m.degeneracy_index, m.correspondences
         )?;
+        if let Some(f) = &a.free_space {
+            writeln!(
+                out,
+                "free space: {} of {} rays cross a target surface before their end ({:.1} %)",
+                f.blocked,
+                f.rays,
+                f.blocked_ratio * 100.0
+            )?;
+        }
         if !a.rejected_because.is_empty() {
             writeln!(out, "rejected because: {}", a.rejected_because.join("; "))?;
         }

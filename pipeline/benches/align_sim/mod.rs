@@ -5,7 +5,7 @@
 use nalgebra::{Isometry3, Point3};
 use starc_hil::sim::run::{run, SimOptions, FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_hil::sim::scenario::Scenario;
-use starc_pipeline::align::{voxel_downsample, Vec3};
+use starc_pipeline::align::{voxel_downsample, Ray, Vec3};
 use starc_pipeline::lio::LioScan;
 use std::path::PathBuf;
 
@@ -65,9 +65,34 @@ pub fn accumulate(scans: &[LioScan], from_ns: u64, to_ns: u64, pose_at: impl Fn(
     out
 }
 
+/// Every `stride`-th point of the scans within [from_ns, to_ns] as a ray from the sensor's
+/// position at its firing time, both moved by `pose_at(t)`.
+pub fn rays(
+    scans: &[LioScan],
+    from_ns: u64,
+    to_ns: u64,
+    stride: usize,
+    pose_at: impl Fn(u64) -> Isometry3<f64>,
+) -> Vec<Ray> {
+    let points = scans
+        .iter()
+        .filter(|s| s.end_ns >= from_ns && s.start_ns <= to_ns)
+        .flat_map(|s| s.points.iter().filter(|p| p.t_ns >= from_ns && p.t_ns <= to_ns));
+    points
+        .step_by(stride.max(1))
+        .map(|p| {
+            let pose = pose_at(p.t_ns);
+            let end = (pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))).coords;
+            Ray { origin: pose.translation.vector, end }
+        })
+        .collect()
+}
+
 /// A registration pair from the simulator, with its truth (maps source points into the target).
 pub struct Pair {
     pub source: Vec<Vec3>,
+    /// A sample of the source's rays (the free-space check).
+    pub rays: Vec<Ray>,
     pub target: Vec<Vec3>,
     pub truth: Isometry3<f64>,
     pub describe: String,
@@ -86,6 +111,7 @@ pub fn sim_pair(scenario: &str, duration_s: f64, t_end_s: f64, window_s: f64) ->
     let inv = at_end.inverse();
     let from = end.saturating_sub((window_s * 1e9) as u64);
     let source = accumulate(&sim.fpv.scans, from, end, |t| inv * truth_at(&sim.fpv_truth, t));
+    let rays = rays(&sim.fpv.scans, from, end, 97, |t| inv * truth_at(&sim.fpv_truth, t));
     let describe = format!(
         "`{scenario}`, seed 1, {duration_s} s: robot map of {} scans (5 cm voxels); rig window {window_s} s ending at t = {t_end_s} s (rig at {:.2}, {:.2}, {:.2} m)",
         sim.robot.scans.len(),
@@ -93,5 +119,5 @@ pub fn sim_pair(scenario: &str, duration_s: f64, t_end_s: f64, window_s: f64) ->
         at_end.translation.y,
         at_end.translation.z
     );
-    Pair { source, target, truth: at_end, describe }
+    Pair { source, rays, target, truth: at_end, describe }
 }

@@ -99,6 +99,18 @@ pub struct AlignConfig {
     /// Only seeds whose coarse NDT score reaches this share of the accepted seed's are refined by
     /// the ambiguity check (0: every seed; 1: only seeds scoring at least as well).
     pub ambiguity_score_ratio: f64,
+    /// Free-space check of a result that passed the other tests, when the source comes with its
+    /// rays ([`crate::align::Aligner::align_with_rays`]): at most this many rays are walked
+    /// through the map (0: off), and the result is rejected when more than
+    /// `free_space_max_blocked` of them cross a mapped surface and end more than
+    /// `free_space_end_margin_m` behind it (a ray that ends on the surface it crossed hit it).
+    pub free_space_rays: usize,
+    pub free_space_max_blocked: f64,
+    /// Sample spacing along a ray; the first `free_space_near_m` of a ray (the rig's own body,
+    /// its operator) are not checked.
+    pub free_space_step_m: f64,
+    pub free_space_near_m: f64,
+    pub free_space_end_margin_m: f64,
 }
 
 impl Default for AlignConfig {
@@ -145,6 +157,11 @@ impl Default for AlignConfig {
             ambiguity_margin: 0.25,
             ambiguity_inlier_margin: 0.01,
             ambiguity_score_ratio: 0.8,
+            free_space_rays: 400,
+            free_space_max_blocked: 0.1,
+            free_space_step_m: 0.1,
+            free_space_near_m: 0.5,
+            free_space_end_margin_m: 0.3,
         }
     }
 }
@@ -218,6 +235,13 @@ impl AlignConfig {
         }
         if self.verify_shift_m > 0.0 && self.verify_max_points == 0 {
             return bad("verify_max_points must be at least 1 when the consistency check is on");
+        }
+        let free_space = [self.free_space_near_m, self.free_space_end_margin_m];
+        if !(self.free_space_step_m.is_finite() && self.free_space_step_m > 0.0)
+            || free_space.iter().any(|v| !(v.is_finite() && *v >= 0.0))
+            || !(0.0..=1.0).contains(&self.free_space_max_blocked)
+        {
+            return bad("free_space_step_m must be positive, the free-space margins not negative, free_space_max_blocked in [0, 1]");
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

@@ -13,6 +13,7 @@
 //! ```
 
 mod config;
+mod free_space;
 mod geometry;
 mod icp;
 mod map;
@@ -21,6 +22,7 @@ mod register;
 mod tiles;
 
 pub use config::AlignConfig;
+pub use free_space::{FreeSpace, Ray};
 pub use geometry::{
     cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample, Vec3,
     VoxelIndex,

@@ -2,6 +2,7 @@
 //! seed, acceptance, and the yaw-grid reseeding around the circle.
 
 use super::config::AlignConfig;
+use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
 use super::geometry::{estimate_normals, pose_rows, voxel_downsample, Vec3, VoxelIndex};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
@@ -85,6 +86,9 @@ pub struct Attempt {
     pub alternatives: Vec<Probe>,
     /// Rejected because another seed fits about as well elsewhere.
     pub ambiguous: bool,
+    /// The free-space check at the result (only for attempts that passed the other tests, and
+    /// only when the source came with rays).
+    pub free_space: Option<FreeSpace>,
 }
 
 /// ICP re-run from a start perturbed off an attempt's result (the consistency check).
@@ -137,6 +141,7 @@ pub struct Aligner {
     config: AlignConfig,
     grids: Vec<NdtGrid>,
     icp_target: IcpTarget,
+    surfels: SurfelGrid,
     /// Time spent preparing the target.
     pub prepare_ms: f64,
 }
@@ -154,6 +159,11 @@ impl Aligner {
             config.ndt_resolutions_m.iter().map(|&r| NdtGrid::new(&ndt_target, r, config.ndt_outlier_ratio)).collect();
         let icp_points = voxel_downsample(target, config.icp_voxel_m);
         let normals = estimate_normals(&icp_points, config.normal_radius_m, config.normal_neighbours);
+        let surfels = if config.free_space_rays > 0 {
+            SurfelGrid::new(&icp_points, &normals, config.icp_voxel_m)
+        } else {
+            SurfelGrid::new(&[], &[], config.icp_voxel_m)
+        };
         let index = VoxelIndex::new(icp_points, config.icp_max_correspondence_m);
         if grids.iter().all(|g| g.cell_count() == 0) || normals.iter().all(Option::is_none) {
             return Err(PipelineError::BadFile {
@@ -161,7 +171,7 @@ impl Aligner {
                 reason: format!("too few points ({}) to align against", target.len()),
             });
         }
-        Ok(Self { config, grids, icp_target: IcpTarget { index, normals }, prepare_ms: ms_since(t0) })
+        Ok(Self { config, grids, icp_target: IcpTarget { index, normals }, surfels, prepare_ms: ms_since(t0) })
     }
 
     pub fn config(&self) -> &AlignConfig {
@@ -174,6 +184,13 @@ impl Aligner {
     /// attempts (the finer NDT levels, then ICP) run on the best-ranked distinct seeds until one is
     /// accepted. With it off, one full attempt runs from `initial`.
     pub fn align(&self, source: &[Vec3], initial: &Isometry3<f64>) -> AlignReport {
+        self.align_with_rays(source, &[], initial)
+    }
+
+    /// [`Aligner::align`] with the source's rays (sensor position to point, in the source's
+    /// frame): a result that passes the other tests must also leave them clear of the map's
+    /// surfaces (the free-space check, `free_space_*`). Without rays the check is skipped.
+    pub fn align_with_rays(&self, source: &[Vec3], rays: &[Ray], initial: &Isometry3<f64>) -> AlignReport {
         let c = &self.config;
         // A guess whose quaternion is off unit length would keep that error through every
         // product below (and scale the points it turns): renormalised first.
@@ -185,6 +202,7 @@ impl Aligner {
         let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
         let source_reduce_ms = ms_since(t0);
         let first_level = self.first_level(&ndt_source);
+        let src = Sources { ndt: &ndt_source, icp: &icp_source, rays };
         let mut attempts = Vec::new();
         let mut seeds = Vec::new();
         let mut seed_ms = 0.0;
@@ -194,7 +212,7 @@ impl Aligner {
             seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
             seed_ms = ms_since(t1);
             let mut tried: Vec<Isometry3<f64>> = Vec::new();
-            self.try_seeds(&seeds, &ndt_source, &icp_source, first_level, &mut tried, &mut attempts);
+            self.try_seeds(&seeds, &src, first_level, &mut tried, &mut attempts);
             // Nothing passed from the guess's position: search again at positions around it.
             let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
             if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
@@ -202,14 +220,14 @@ impl Aligner {
                 let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
                 seed_ms += ms_since(t2);
                 let before = attempts.len();
-                self.try_seeds(&more, &ndt_source, &icp_source, first_level, &mut tried, &mut attempts);
+                self.try_seeds(&more, &src, first_level, &mut tried, &mut attempts);
                 if attempts.len() == before {
                     tracing::debug!("escalated seed search found no new basin");
                 }
                 seeds.extend(more);
             }
         } else {
-            attempts.push(self.attempt(&ndt_source, &icp_source, initial, first_level, 0.0, [0.0; 2]));
+            attempts.push(self.attempt(&src, initial, first_level, 0.0, [0.0; 2]));
         }
         self.report(initial, attempts, seeds, icp_source.len(), source_reduce_ms, seed_ms, t0)
     }
@@ -228,8 +246,7 @@ impl Aligner {
     fn try_seeds(
         &self,
         seeds: &[Seed],
-        ndt_source: &[Vec3],
-        icp_source: &[Vec3],
+        src: &Sources,
         first_level: usize,
         tried: &mut Vec<Isometry3<f64>>,
         attempts: &mut Vec<Attempt>,
@@ -249,10 +266,10 @@ impl Aligner {
             }
             tried.push(s.pose);
             let after_seeds = (first_level + c.seed_levels).min(self.grids.len().saturating_sub(1));
-            let mut a = self.attempt(ndt_source, icp_source, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
+            let mut a = self.attempt(src, &s.pose, after_seeds, s.yaw_offset_deg, s.shift_m);
             let done = a.accepted;
             if done && c.ambiguity_seeds > 0 {
-                self.check_ambiguity(seeds, s.score, ndt_source, icp_source, after_seeds, tried, &mut a);
+                self.check_ambiguity(seeds, s.score, src, after_seeds, tried, &mut a);
             }
             let stop = done || a.ambiguous;
             attempts.push(a);
@@ -267,20 +284,18 @@ impl Aligner {
     /// land elsewhere with a fit about as good or better (RMS at most `ambiguity_margin` above,
     /// inlier ratio at most `ambiguity_inlier_margin` below, on the same thinned points): a corridor or a repeated structure fits in several places, and a place the map lacks
     /// can fit somewhere else; either way the first good fit is a coin toss, so it is rejected.
-    #[allow(clippy::too_many_arguments)]
     fn check_ambiguity(
         &self,
         seeds: &[Seed],
         accepted_score: f64,
-        ndt_source: &[Vec3],
-        icp_source: &[Vec3],
+        src: &Sources,
         first_level: usize,
         tried: &[Isometry3<f64>],
         a: &mut Attempt,
     ) {
         let c = &self.config;
         let t0 = Instant::now();
-        let source = thin(icp_source.to_vec(), c.verify_max_points);
+        let source = thin(src.icp.to_vec(), c.verify_max_points);
         let params = self.icp_params();
         let here = icp::refine(&self.icp_target, &source, a.pose, &IcpParams { max_iterations: 0, ..params });
         let distinct = |p: &Isometry3<f64>, q: &Isometry3<f64>| {
@@ -304,7 +319,7 @@ impl Aligner {
             checked.push(s.pose);
             let mut pose = s.pose;
             for grid in self.grids.iter().skip(first_level) {
-                pose = ndt::refine_level(grid, ndt_source, pose, c.ndt_max_iterations).pose;
+                pose = ndt::refine_level(grid, src.ndt, pose, c.ndt_max_iterations).pose;
             }
             let r = icp::refine(&self.icp_target, &source, pose, &params);
             let (moved_m, moved_deg) = super::geometry::pose_error(&a.pose, &r.pose);
@@ -338,6 +353,16 @@ impl Aligner {
             }
         }
         a.verify_ms += ms_since(t0);
+    }
+
+    fn ray_params(&self) -> RayParams {
+        let c = &self.config;
+        RayParams {
+            max_rays: c.free_space_rays,
+            step_m: c.free_space_step_m,
+            near_m: c.free_space_near_m,
+            end_margin_m: c.free_space_end_margin_m,
+        }
     }
 
     fn icp_params(&self) -> IcpParams {
@@ -464,8 +489,7 @@ impl Aligner {
 
     fn attempt(
         &self,
-        ndt_source: &[Vec3],
-        icp_source: &[Vec3],
+        src: &Sources,
         seed: &Isometry3<f64>,
         first_level: usize,
         seed_yaw_offset_deg: f64,
@@ -476,14 +500,14 @@ impl Aligner {
         let mut pose = *seed;
         let mut ndt_iterations = Vec::with_capacity(self.grids.len());
         for grid in self.grids.iter().skip(first_level) {
-            let level = ndt::refine_level(grid, ndt_source, pose, c.ndt_max_iterations);
+            let level = ndt::refine_level(grid, src.ndt, pose, c.ndt_max_iterations);
             pose = level.pose;
             ndt_iterations.push(level.iterations);
         }
         let ndt_ms = ms_since(t0);
         let t1 = Instant::now();
         let params = self.icp_params();
-        let mut r = icp::refine(&self.icp_target, icp_source, pose, &params);
+        let mut r = icp::refine(&self.icp_target, src.icp, pose, &params);
         let icp_ms = ms_since(t1);
         let mut rejected_because = self.rejections(&metrics_of(&r));
         // Consistency check: from starts around the result, ICP must not settle elsewhere with a
@@ -493,7 +517,7 @@ impl Aligner {
         let mut probes = Vec::new();
         let mut verify_hops = 0;
         if rejected_because.is_empty() && c.verify_shift_m > 0.0 {
-            let probe_source = thin(icp_source.to_vec(), c.verify_max_points);
+            let probe_source = thin(src.icp.to_vec(), c.verify_max_points);
             loop {
                 let (here, found) = self.probe(&probe_source, &r.pose, &params);
                 let better = found
@@ -520,12 +544,23 @@ impl Aligner {
                     break;
                 }
                 verify_hops += 1;
-                r = icp::refine(&self.icp_target, icp_source, better.pose, &params);
+                r = icp::refine(&self.icp_target, src.icp, better.pose, &params);
                 rejected_because = self.rejections(&metrics_of(&r));
                 if !rejected_because.is_empty() {
                     break;
                 }
             }
+        }
+        let free_space = (rejected_because.is_empty() && c.free_space_rays > 0 && !src.rays.is_empty())
+            .then(|| self.surfels.check(src.rays, &r.pose, &self.ray_params()));
+        if let Some(f) = free_space.as_ref().filter(|f| f.blocked_ratio > c.free_space_max_blocked) {
+            rejected_because.push(format!(
+                "sees through the map: {} of {} rays ({:.0} %) cross a mapped surface before their end (at most {:.0} %)",
+                f.blocked,
+                f.rays,
+                f.blocked_ratio * 100.0,
+                c.free_space_max_blocked * 100.0
+            ));
         }
         let verify_ms = ms_since(t2);
         Attempt {
@@ -545,6 +580,7 @@ impl Aligner {
             verify_ms,
             alternatives: Vec::new(),
             ambiguous: false,
+            free_space,
         }
     }
 
@@ -607,6 +643,13 @@ impl Aligner {
         }
         why
     }
+}
+
+/// The source at each reduction, and its rays.
+struct Sources<'a> {
+    ndt: &'a [Vec3],
+    icp: &'a [Vec3],
+    rays: &'a [Ray],
 }
 
 fn metrics_of(r: &icp::IcpResult) -> AlignMetrics {

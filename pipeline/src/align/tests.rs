@@ -203,6 +203,9 @@ fn config_defaults_and_example_load() {
     assert!(AlignConfig::from_toml("verify_margin = 1.0\n").is_err());
     assert!(AlignConfig::from_toml("ambiguity_margin = -0.1\n").is_err());
     assert!(AlignConfig::from_toml("verify_max_points = 0\n").is_err());
+    assert!(AlignConfig::from_toml("free_space_max_blocked = 1.5\n").is_err());
+    assert!(AlignConfig::from_toml("free_space_step_m = 0\n").is_err());
+    assert!(AlignConfig::from_toml("free_space_end_margin_m = -0.1\n").is_err());
 }
 
 #[test]
@@ -217,4 +220,60 @@ fn bad_input_does_not_panic() {
     let target = vec![Vec3::new(f64::NAN, 0.0, 0.0), Vec3::new(1e300, -1e300, 0.0)];
     assert!(Aligner::new(&target, AlignConfig::default()).is_err());
     assert!(Aligner::new(&[], AlignConfig::default()).is_err());
+}
+
+/// A 10 x 8 x 3 m room with a box in one corner, sampled every 10 cm.
+fn room() -> Vec<Vec3> {
+    let mut points = Vec::new();
+    let grid = |n: i32| (0..=n).map(|k| f64::from(k) * 0.1);
+    for a in grid(100) {
+        for z in grid(30) {
+            points.push(Vec3::new(a, 0.0, z));
+            points.push(Vec3::new(a, 8.0, z));
+        }
+    }
+    for b in grid(80) {
+        for z in grid(30) {
+            points.push(Vec3::new(0.0, b, z));
+            points.push(Vec3::new(10.0, b, z));
+        }
+        for a in grid(100) {
+            points.push(Vec3::new(a, b, 0.0));
+        }
+    }
+    for a in grid(10) {
+        for z in grid(10) {
+            points.push(Vec3::new(8.0 + a, 6.0, z));
+            points.push(Vec3::new(8.0, 6.0 + a, z));
+        }
+    }
+    points
+}
+
+#[test]
+fn the_free_space_check_rejects_rays_that_pass_through_the_map() {
+    let target = room();
+    let config = AlignConfig { reseed_yaw_step_deg: 0.0, verify_shift_m: 0.0, ..AlignConfig::default() };
+    let aligner = Aligner::new(&target, config).unwrap();
+    let source = target.clone();
+    // Seen from inside the room: every ray ends on the surface it meets first, but for the few
+    // to the corner behind the box (the made-up source holds them; a real scan would not).
+    let inside = Vec3::new(4.0, 3.0, 1.5);
+    let rays: Vec<Ray> = source.iter().step_by(7).map(|p| Ray { origin: inside, end: *p }).collect();
+    let report = aligner.align_with_rays(&source, &rays, &Isometry3::identity());
+    let a = report.best().unwrap();
+    let f = a.free_space.as_ref().expect("the check ran");
+    assert!(report.accepted, "{:?}", a.rejected_because);
+    assert!(f.rays > 300 && f.blocked_ratio < 0.05, "{f:?}");
+    // The same points claimed seen from outside the room, beyond its x = 0 wall: the rays to
+    // the far walls pass through that wall. The surfaces fit as well; the rays give it away.
+    let outside = Vec3::new(-3.0, 4.0, 1.5);
+    let rays: Vec<Ray> = source.iter().step_by(7).map(|p| Ray { origin: outside, end: *p }).collect();
+    let report = aligner.align_with_rays(&source, &rays, &Isometry3::identity());
+    let a = report.best().unwrap();
+    assert!(!report.accepted);
+    assert!(a.rejected_because.iter().any(|w| w.starts_with("sees through the map")), "{:?}", a.rejected_because);
+    assert!(a.free_space.as_ref().unwrap().blocked_ratio > 0.5);
+    // No rays: no check, as `align` does.
+    assert!(aligner.align(&source, &Isometry3::identity()).best().unwrap().free_space.is_none());
 }

@@ -7,7 +7,7 @@
 //! [`RigCore::apply`].
 
 use super::place::{ScanPlacer, ScanPoses};
-use crate::align::{voxel_downsample, AlignConfig, AlignReport, Aligner};
+use crate::align::{voxel_downsample, AlignConfig, AlignReport, Aligner, Ray};
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use crate::PipelineError;
@@ -111,10 +111,11 @@ impl AlignJob {
         // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
         // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
         // off and accepted it; reduced alike, it refuses.)
-        let (raw, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
+        let (raw, rays, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
         let source = voxel_downsample(&raw, self.voxel_m);
         let aligner = Aligner::new(&self.target, self.config)?;
-        let report = aligner.align(&source, &(self.guess_world_t_lidar * self.lidar_pose.inverse() * frame));
+        let guess = self.guess_world_t_lidar * self.lidar_pose.inverse() * frame;
+        let report = aligner.align_with_rays(&source, &rays, &guess);
         // The registered frame back to the rig's LiDAR pose in the world.
         let frame_t_lidar = frame.inverse() * self.lidar_pose;
         let world_t_lidar = report.pose * frame_t_lidar;
@@ -134,6 +135,7 @@ impl AlignJob {
                 rms_m = m.rms_residual_m,
                 inliers = m.inlier_ratio,
                 degeneracy = m.degeneracy_index,
+                rays_blocked = a.free_space.as_ref().map_or(f64::NAN, |f| f.blocked_ratio),
                 accepted = a.accepted,
                 why = %a.rejected_because.join("; "),
                 "rig alignment attempt"
@@ -378,17 +380,21 @@ fn start_offset_m(
 
 /// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
 /// the odometry's (gravity-aligned) axes; the points and that frame (in odometry).
+/// Every this many window points is also kept as a ray (sensor to point).
+const RAY_STRIDE: usize = 32;
+
 fn window(
     scans: &[Arc<LioScan>],
     odom: &PoseBuffer,
     end_ns: u64,
     window_ns: u64,
-) -> (Vec<Vector3<f64>>, Isometry3<f64>) {
-    let Ok(at_end) = odom.at(end_ns) else { return (Vec::new(), Isometry3::identity()) };
+) -> (Vec<Vector3<f64>>, Vec<Ray>, Isometry3<f64>) {
+    let Ok(at_end) = odom.at(end_ns) else { return (Vec::new(), Vec::new(), Isometry3::identity()) };
     let frame = Isometry3::from_parts(at_end.translation, UnitQuaternion::identity());
     let inv = frame.inverse();
     let from = end_ns.saturating_sub(window_ns);
     let mut out = Vec::new();
+    let mut rays = Vec::new();
     for s in scans.iter().filter(|s| s.end_ns >= from && s.start_ns <= end_ns) {
         let poses = ScanPoses::new(s.start_ns, s.end_ns, |t| odom.at(t).ok());
         for p in s.points.iter().filter(|p| p.t_ns >= from && p.t_ns <= end_ns) {
@@ -397,10 +403,14 @@ fn window(
             }
             let Some(pose) = poses.at(p.t_ns) else { continue };
             let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
+            // A sample of the rays is plenty for the free-space check (it walks a few hundred).
+            if out.len() % RAY_STRIDE == 0 {
+                rays.push(Ray { origin: (inv * pose).translation.vector, end: q.coords });
+            }
             out.push(q.coords);
         }
     }
-    (out, frame)
+    (out, rays, frame)
 }
 
 #[cfg(test)]

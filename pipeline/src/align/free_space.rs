@@ -1,0 +1,203 @@
+//! Free-space check of a registration. A pose can fit the surfaces well and still be wrong: a
+//! room that matches part of another (the auditorium's lobby against the hall) leaves every
+//! point on a surface of the map. What such a pose cannot hide is that the rig's rays then pass
+//! through the map's walls and seats on their way to the points they hit. At the right pose a
+//! ray crosses no mapped surface before its end.
+
+use super::geometry::{key_of, KeyMap, Vec3};
+use nalgebra::{Isometry3, Point3};
+use serde::Serialize;
+
+/// One LiDAR ray of the source: from the sensor's position when it fired to the point it hit,
+/// both in the source's frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub end: Vec3,
+}
+
+/// What the check found for one pose.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FreeSpace {
+    /// Rays long enough to be checked.
+    pub rays: usize,
+    /// Rays that crossed a mapped surface and ended more than the end margin behind it.
+    pub blocked: usize,
+    /// `blocked / rays` (0 when no ray was checked).
+    pub blocked_ratio: f64,
+}
+
+/// How rays are walked.
+#[derive(Clone, Copy, Debug)]
+pub struct RayParams {
+    /// Rays checked, at most (taken evenly through those given).
+    pub max_rays: usize,
+    /// Distance between samples along a ray.
+    pub step_m: f64,
+    /// The first this many metres of a ray are not checked (the rig's own body, the operator).
+    pub near_m: f64,
+    /// A crossing counts only when the ray ends more than this behind the crossed surface's
+    /// plane: a ray that ends on (or just behind) the surface it crossed hit that surface, seen
+    /// through registration error and map noise, and a ray grazing the floor towards a far
+    /// point crosses its bumps with the end still on the floor.
+    pub end_margin_m: f64,
+}
+
+/// A small plane patch of the map: a point and its unit normal.
+#[derive(Clone, Copy, Debug)]
+struct Surfel {
+    centre: Vec3,
+    normal: Vec3,
+}
+
+/// The map's surfels, bucketed by voxel.
+pub struct SurfelGrid {
+    inv_cell_m: f64,
+    cell_m: f64,
+    cells: KeyMap<Vec<Surfel>>,
+}
+
+impl SurfelGrid {
+    /// Surfels of the points that have a normal (corners and scatter have none and block nothing).
+    pub fn new(points: &[Vec3], normals: &[Option<Vec3>], cell_m: f64) -> Self {
+        let cell_m = cell_m.max(1e-3);
+        let inv_cell_m = 1.0 / cell_m;
+        let mut cells: KeyMap<Vec<Surfel>> = KeyMap::default();
+        for (p, n) in points.iter().zip(normals) {
+            if let Some(n) = n {
+                cells.entry(key_of(p, inv_cell_m)).or_default().push(Surfel { centre: *p, normal: *n });
+            }
+        }
+        Self { inv_cell_m, cell_m, cells }
+    }
+
+    /// Whether the segment `a`-`b` (around sample `at`) passes through a surfel of `at`'s voxel
+    /// (it changes sides of the surfel's plane within a cell's size of the surfel's centre) with
+    /// the ray's `end` more than `margin_m` beyond that plane.
+    fn crosses(&self, at: &Vec3, a: &Vec3, b: &Vec3, end: &Vec3, margin_m: f64) -> bool {
+        let Some(surfels) = self.cells.get(&key_of(at, self.inv_cell_m)) else { return false };
+        surfels.iter().any(|s| {
+            let da = (a - s.centre).dot(&s.normal);
+            let db = (b - s.centre).dot(&s.normal);
+            if da * db >= 0.0 {
+                return false;
+            }
+            let crossing = a + (b - a) * (da / (da - db));
+            let behind_m = -(end - s.centre).dot(&s.normal) * da.signum();
+            behind_m > margin_m && (crossing - s.centre).norm_squared() <= self.cell_m * self.cell_m
+        })
+    }
+
+    /// Walks every checked ray, moved by `pose` (source into map), and counts those that cross
+    /// a surface before their end.
+    pub fn check(&self, rays: &[Ray], pose: &Isometry3<f64>, p: &RayParams) -> FreeSpace {
+        let step = p.step_m.max(0.01);
+        let stride =
+            if p.max_rays > 0 && rays.len() > p.max_rays { rays.len() as f64 / p.max_rays as f64 } else { 1.0 };
+        let count = if stride > 1.0 { p.max_rays } else { rays.len() };
+        let mut out = FreeSpace::default();
+        for i in 0..count {
+            let Some(ray) = rays.get((i as f64 * stride) as usize) else { continue };
+            let o = (pose * Point3::from(ray.origin)).coords;
+            let e = (pose * Point3::from(ray.end)).coords;
+            let length = (e - o).norm();
+            let last = length - p.end_margin_m;
+            // NaN (a ray of non-finite points) fails this too.
+            if last.partial_cmp(&(p.near_m + step)) != Some(std::cmp::Ordering::Greater) {
+                continue;
+            }
+            out.rays += 1;
+            let dir = (e - o) / length;
+            let mut s = p.near_m + step;
+            while s < last {
+                let at = o + dir * s;
+                if self.crosses(&at, &(at - dir * step), &(at + dir * step), &e, p.end_margin_m) {
+                    out.blocked += 1;
+                    break;
+                }
+                s += step;
+            }
+        }
+        out.blocked_ratio = if out.rays > 0 { out.blocked as f64 / out.rays as f64 } else { 0.0 };
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::align::pose_xyz_yaw;
+
+    /// A wall at x = 5 (normal along x), 4 m wide and 3 m tall, in 0.25 m surfels.
+    fn wall(x_m: f64) -> (Vec<Vec3>, Vec<Option<Vec3>>) {
+        let mut points = Vec::new();
+        for iy in -8..8 {
+            for iz in 0..12 {
+                points.push(Vec3::new(x_m, f64::from(iy) * 0.25 + 0.125, f64::from(iz) * 0.25 + 0.125));
+            }
+        }
+        let normals = points.iter().map(|_| Some(Vec3::new(-1.0, 0.0, 0.0))).collect();
+        (points, normals)
+    }
+
+    fn params() -> RayParams {
+        RayParams { max_rays: 100, step_m: 0.1, near_m: 0.5, end_margin_m: 0.3 }
+    }
+
+    #[test]
+    fn rays_that_end_on_the_wall_pass_and_rays_through_it_are_blocked() {
+        let (points, normals) = wall(5.0);
+        let grid = SurfelGrid::new(&points, &normals, 0.25);
+        let origin = Vec3::new(0.0, 0.0, 1.5);
+        // Ending on the wall (a few centimetres off, as registration leaves them).
+        let on: Vec<Ray> = (-5..=5).map(|k| Ray { origin, end: Vec3::new(5.03, f64::from(k) * 0.3, 1.0) }).collect();
+        let r = grid.check(&on, &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked), (11, 0));
+        // The same rays with the rig placed 3 m farther back end 3 m past the wall's near side:
+        // moved by a pose that puts the wall between the origin and the ends.
+        let wrong = pose_xyz_yaw(3.0, 0.0, 0.0, 0.0);
+        let r = grid.check(&on, &wrong, &params());
+        assert_eq!((r.rays, r.blocked), (11, 11));
+        assert!((r.blocked_ratio - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_ray_grazing_along_a_wall_is_not_blocked() {
+        let (points, normals) = wall(5.0);
+        let grid = SurfelGrid::new(&points, &normals, 0.25);
+        // From beside the wall's plane, along it, ending on its far edge.
+        let ray = Ray { origin: Vec3::new(4.9, -6.0, 1.5), end: Vec3::new(4.98, 1.9, 1.5) };
+        let r = grid.check(&[ray], &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked), (1, 0));
+        // Crossing the wall at a shallow angle but ending 10 cm behind it (the wall's bumps, a
+        // far floor point): the end is still on the surface.
+        let ray = Ray { origin: Vec3::new(4.8, -6.0, 1.5), end: Vec3::new(5.1, 1.9, 1.5) };
+        let r = grid.check(&[ray], &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked), (1, 0));
+    }
+
+    #[test]
+    fn short_rays_and_no_rays_are_not_counted() {
+        let (points, normals) = wall(5.0);
+        let grid = SurfelGrid::new(&points, &normals, 0.25);
+        let short = Ray { origin: Vec3::zeros(), end: Vec3::new(0.8, 0.0, 0.0) };
+        let r = grid.check(&[short], &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked, r.blocked_ratio), (0, 0, 0.0));
+        let r = grid.check(&[], &Isometry3::identity(), &params());
+        assert_eq!(r.rays, 0);
+        let nan = Ray { origin: Vec3::zeros(), end: Vec3::new(f64::NAN, 1.0, 1.0) };
+        let r = grid.check(&[nan], &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked), (0, 0));
+    }
+
+    #[test]
+    fn many_rays_are_thinned_to_the_limit() {
+        let (points, normals) = wall(5.0);
+        let grid = SurfelGrid::new(&points, &normals, 0.25);
+        let rays: Vec<Ray> = (0..1000)
+            .map(|k| Ray { origin: Vec3::zeros(), end: Vec3::new(8.0, f64::from(k % 10) * 0.1, 1.0) })
+            .collect();
+        let r = grid.check(&rays, &Isometry3::identity(), &params());
+        assert_eq!((r.rays, r.blocked), (100, 100));
+    }
+}
