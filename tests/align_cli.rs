@@ -5,7 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Output};
 
 /// The pair, or `None` (the test says it skipped) where shared/data is absent, as in the other
 /// tests on that data.
@@ -18,16 +18,20 @@ fn pair() -> Option<(PathBuf, PathBuf)> {
     Some((dir.join("source.ply"), dir.join("target.ply")))
 }
 
-fn align(source: &Path, target: &Path, origin: &str) -> (bool, serde_json::Value, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+fn starc_align(source: &Path, target: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_starc"))
         .arg("align")
         .arg("--source")
         .arg(source)
         .arg("--target")
         .arg(target)
-        .args(["--scan-origin", origin, "--json"])
+        .args(args)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+fn align(source: &Path, target: &Path, origin: &str) -> (bool, serde_json::Value, String) {
+    let out = starc_align(source, target, &["--scan-origin", origin, "--json"]);
     let report = serde_json::from_slice(&out.stdout).unwrap();
     (out.status.success(), report, String::from_utf8_lossy(&out.stderr).into_owned())
 }
@@ -54,15 +58,7 @@ fn the_scan_origin_turns_on_the_free_space_check() {
 #[test]
 fn a_bad_scan_origin_is_a_clear_error() {
     let Some((source, target)) = pair() else { return };
-    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
-        .arg("align")
-        .arg("--source")
-        .arg(source)
-        .arg("--target")
-        .arg(target)
-        .args(["--scan-origin", "0,0"])
-        .output()
-        .unwrap();
+    let out = starc_align(&source, &target, &["--scan-origin", "0,0"]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("expected three finite numbers"), "{stderr}");
