@@ -190,6 +190,7 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
     let mut rejected_free_space = 0usize;
     // Where the time goes, per trial: source reduction, seed ranking, full attempts, checks.
     let mut split_ms: [Vec<f64>; 4] = Default::default();
+    let mut free_space_ms = Vec::new();
     let mut starts = Vec::new();
     let mut ours = Vec::new();
     let mut attempts_hist = [0usize; 8];
@@ -207,6 +208,7 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
             let cpu_ms = thread_cpu_ms() - c0;
             for a in &r.attempts {
                 let Some(f) = &a.free_space else { continue };
+                free_space_ms.push(f.ms);
                 let (am, ad) = pose_error(&a.pose, truth);
                 if am < TOL_M && ad < TOL_DEG {
                     blocked_right.push(f.blocked_ratio);
@@ -332,6 +334,15 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
         }
     }
     println!("trials with an attempt rejected by the free-space check: {rejected_free_space}");
+    if !free_space_ms.is_empty() {
+        let v = sorted(free_space_ms.iter().copied());
+        println!(
+            "free-space check ms per attempt: median {:.2} p99 {:.2} max {:.2}",
+            pct(&v, 0.5),
+            pct(&v, 0.99),
+            v.last().copied().unwrap_or(f64::NAN)
+        );
+    }
     let med = |v: &[f64]| pct(&sorted(v.iter().copied()), 0.5);
     println!(
         "time per trial, median ms: source reduction {:.1}, seed ranking {:.1}, NDT+ICP attempts {:.1}, checks {:.1}",

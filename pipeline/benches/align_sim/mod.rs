@@ -6,7 +6,7 @@ use nalgebra::{Isometry3, Point3};
 use starc_hil::sim::run::{run, SimOptions, FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_hil::sim::scenario::Scenario;
 use starc_pipeline::align::{voxel_downsample, Ray, Vec3};
-use starc_pipeline::lio::LioScan;
+use starc_pipeline::lio::{LioScan, TimedPoint};
 use std::path::PathBuf;
 
 #[path = "../../../tests/support/tum.rs"]
@@ -52,17 +52,22 @@ impl Drop for SimRun {
     }
 }
 
+/// The points of the scans fired within [from_ns, to_ns].
+fn fired_within(scans: &[LioScan], from_ns: u64, to_ns: u64) -> impl Iterator<Item = &TimedPoint> {
+    scans
+        .iter()
+        .filter(move |s| s.end_ns >= from_ns && s.start_ns <= to_ns)
+        .flat_map(move |s| s.points.iter().filter(move |p| p.t_ns >= from_ns && p.t_ns <= to_ns))
+}
+
+fn xyz(p: &TimedPoint) -> Point3<f64> {
+    Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))
+}
+
 /// Points of the scans within [from_ns, to_ns], each moved by the pose `pose_at(t)` of its own
 /// firing time (into the world, or into any frame the poses are in).
 pub fn accumulate(scans: &[LioScan], from_ns: u64, to_ns: u64, pose_at: impl Fn(u64) -> Isometry3<f64>) -> Vec<Vec3> {
-    let mut out = Vec::new();
-    for s in scans.iter().filter(|s| s.end_ns >= from_ns && s.start_ns <= to_ns) {
-        for p in s.points.iter().filter(|p| p.t_ns >= from_ns && p.t_ns <= to_ns) {
-            let q = pose_at(p.t_ns) * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-            out.push(q.coords);
-        }
-    }
-    out
+    fired_within(scans, from_ns, to_ns).map(|p| (pose_at(p.t_ns) * xyz(p)).coords).collect()
 }
 
 /// Every `stride`-th point of the scans within [from_ns, to_ns] as a ray from the sensor's
@@ -74,16 +79,11 @@ pub fn rays(
     stride: usize,
     pose_at: impl Fn(u64) -> Isometry3<f64>,
 ) -> Vec<Ray> {
-    let points = scans
-        .iter()
-        .filter(|s| s.end_ns >= from_ns && s.start_ns <= to_ns)
-        .flat_map(|s| s.points.iter().filter(|p| p.t_ns >= from_ns && p.t_ns <= to_ns));
-    points
+    fired_within(scans, from_ns, to_ns)
         .step_by(stride.max(1))
         .map(|p| {
             let pose = pose_at(p.t_ns);
-            let end = (pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))).coords;
-            Ray { origin: pose.translation.vector, end }
+            Ray { origin: pose.translation.vector, end: (pose * xyz(p)).coords }
         })
         .collect()
 }

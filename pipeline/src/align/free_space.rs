@@ -7,6 +7,7 @@
 use super::geometry::{key_of, KeyMap, Vec3};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
+use std::time::Instant;
 
 /// One LiDAR ray of the source: from the sensor's position when it fired to the point it hit,
 /// both in the source's frame.
@@ -25,6 +26,8 @@ pub struct FreeSpace {
     pub blocked: usize,
     /// `blocked / rays` (0 when no ray was checked).
     pub blocked_ratio: f64,
+    /// Time the check took.
+    pub ms: f64,
 }
 
 /// How rays are walked.
@@ -91,6 +94,7 @@ impl SurfelGrid {
     /// Walks every checked ray, moved by `pose` (source into map), and counts those that cross
     /// a surface before their end.
     pub fn check(&self, rays: &[Ray], pose: &Isometry3<f64>, p: &RayParams) -> FreeSpace {
+        let t0 = Instant::now();
         let step = p.step_m.max(0.01);
         let stride =
             if p.max_rays > 0 && rays.len() > p.max_rays { rays.len() as f64 / p.max_rays as f64 } else { 1.0 };
@@ -119,6 +123,7 @@ impl SurfelGrid {
             }
         }
         out.blocked_ratio = if out.rays > 0 { out.blocked as f64 / out.rays as f64 } else { 0.0 };
+        out.ms = t0.elapsed().as_secs_f64() * 1e3;
         out
     }
 }

@@ -378,11 +378,13 @@ fn start_offset_m(
     (start.translation.vector - hint.translation.vector).norm()
 }
 
-/// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
-/// the odometry's (gravity-aligned) axes; the points and that frame (in odometry).
-/// Every this many window points is also kept as a ray (sensor to point).
+/// Every this many window points is also kept as a ray (sensor to point): the free-space check
+/// walks a few hundred.
 const RAY_STRIDE: usize = 32;
 
+/// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
+/// the odometry's (gravity-aligned) axes: the points, a sample of their rays, and that frame
+/// (in odometry).
 fn window(
     scans: &[Arc<LioScan>],
     odom: &PoseBuffer,
@@ -403,7 +405,6 @@ fn window(
             }
             let Some(pose) = poses.at(p.t_ns) else { continue };
             let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-            // A sample of the rays is plenty for the free-space check (it walks a few hundred).
             if out.len() % RAY_STRIDE == 0 {
                 rays.push(Ray { origin: (inv * pose).translation.vector, end: q.coords });
             }
