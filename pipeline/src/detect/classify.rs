@@ -35,13 +35,18 @@ const LYING_HEIGHT_SOFT_M: f64 = 0.05;
 
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
+    score_with_face_share(f, cfg, cfg.max_face_share)
+}
+
+/// [`score`] with another largest face share (the face gate of a person already followed).
+pub fn score_with_face_share(f: &ClusterFeatures, cfg: &DetectConfig, max_face_share: f64) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
     // Boxes and slabs: standing or sitting people are thicker than a face and not boxy. (A
     // lying body is low and round: most of its points are near its box's faces anyway.) With
     // few points (far away, a sliver through a gap) most of them are near some face anyway, so
     // only nearly all of them on faces counts against it.
     let min_width = if f.points >= FACE_MIN_POINTS { MIN_WIDTH_M } else { MIN_WIDTH_FEW_POINTS_M };
-    let max_face = if f.points >= FACE_MIN_POINTS { cfg.max_face_share } else { (cfg.max_face_share + 0.25).min(0.9) };
+    let max_face = if f.points >= FACE_MIN_POINTS { max_face_share } else { (max_face_share + 0.25).min(0.9) };
     let boxy = band(f.face_share, 0.0, max_face, 0.1);
     let thick = band(f.thickness_m, cfg.min_thickness_m, f64::MAX, 0.005) * boxy;
     // Whole bodies are not flat; head and shoulders alone can be (and are judged without it).

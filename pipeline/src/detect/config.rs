@@ -70,6 +70,19 @@ pub struct DetectConfig {
     /// (learned from the window) has no known height: it is taken only as an upright person at
     /// least `upright_height_m[0]` tall, never as sitting or crouching (0: no check).
     pub fov_edge_margin_deg: f64,
+    /// A person confirmed by every gate is followed for this long (0: no following): a cluster
+    /// within `follow_radius_m` of where they were, in a later window, that fails only what a
+    /// partial view fails (a face share up to `follow_max_face_share`, a top cut by the field of
+    /// view) is still that person. Only full confirmations extend the time, so a track never
+    /// lives on its own continuations. A person is followed once every gate has confirmed them
+    /// `follow_min_confirmations` times in that time (one window's fluke is not), counting a
+    /// confirmation as theirs when it lies within `follow_radius_m` plus a walk at
+    /// `follow_walk_mps` since it.
+    pub follow_s: f64,
+    pub follow_min_confirmations: usize,
+    pub follow_walk_mps: f64,
+    pub follow_radius_m: f64,
+    pub follow_max_face_share: f64,
 }
 
 impl Default for DetectConfig {
@@ -101,6 +114,11 @@ impl Default for DetectConfig {
             min_thickness_m: 0.02,
             min_score: 0.5,
             fov_edge_margin_deg: 1.0,
+            follow_s: 1.0,
+            follow_min_confirmations: 5,
+            follow_walk_mps: 1.5,
+            follow_radius_m: 0.4,
+            follow_max_face_share: 0.75,
         }
     }
 }
@@ -151,6 +169,18 @@ impl DetectConfig {
         }
         if !(self.fov_edge_margin_deg.is_finite() && (0.0..=20.0).contains(&self.fov_edge_margin_deg)) {
             return Err(bad("fov_edge_margin_deg must be between 0 and 20"));
+        }
+        if !(self.follow_s.is_finite() && (0.0..=10.0).contains(&self.follow_s)) {
+            return Err(bad("follow_s must be between 0 and 10"));
+        }
+        if !(self.follow_walk_mps.is_finite() && (0.0..=10.0).contains(&self.follow_walk_mps)) {
+            return Err(bad("follow_walk_mps must be between 0 and 10"));
+        }
+        if !(self.follow_radius_m.is_finite() && (0.0..=2.0).contains(&self.follow_radius_m)) {
+            return Err(bad("follow_radius_m must be between 0 and 2"));
+        }
+        if !(self.follow_max_face_share >= 0.0 && self.follow_max_face_share <= 1.0) {
+            return Err(bad("follow_max_face_share must be in [0, 1]"));
         }
         if !self.max_bottom_m.is_finite() {
             return Err(bad("max_bottom_m must be finite"));

@@ -1,14 +1,14 @@
 //! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
 //! clusters, each cluster scored as a person.
 
-use super::classify::{score, tallest_scorable_m, too_big};
+use super::classify::{score, score_with_face_share, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
 use super::fov::FovEnvelope;
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
 use crate::PipelineError;
-use nalgebra::Vector3;
+use nalgebra::{Vector2, Vector3};
 
 /// A cluster whose top is this close to the ceiling cut touches the ceiling.
 const CEILING_CONTACT_M: f64 = 0.05;
@@ -17,10 +17,12 @@ const CEILING_CONTACT_M: f64 = 0.05;
 /// lying against something taller).
 const LOW_SHARE: f64 = 0.6;
 
-/// Geometric person detector (see the module docs). Holds no state between windows beyond
-/// scratch space.
+/// Geometric person detector (see the module docs). Between windows it holds only scratch
+/// space and the people it confirmed in the last `follow_s` (see [`DetectConfig::follow_s`]).
 pub struct GeometricDetector {
     cfg: DetectConfig,
+    /// Where every gate last confirmed someone (x, y in the world) and when (window stamp, ns).
+    confirmed: Vec<(Vector2<f64>, u64)>,
     kept: Vec<(u32, Vector3<f64>)>,
     /// The last window's floor and clusters, for diagnosis and tuning.
     last_floor: Option<FloorModel>,
@@ -35,6 +37,7 @@ impl GeometricDetector {
         cfg.validate()?;
         Ok(Self {
             cfg,
+            confirmed: Vec::new(),
             kept: Vec::new(),
             last_floor: None,
             last_clusters: Vec::new(),
@@ -77,6 +80,23 @@ impl Detector for GeometricDetector {
         let cfg = &self.cfg;
         self.last_clusters.clear();
         self.last_cluster_points.clear();
+        let now_ns = window.stamp.ns;
+        let follow_ns = (cfg.follow_s * 1e9) as u64;
+        // A window older than one already seen (a replay restarted) follows nobody.
+        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= follow_ns);
+        let followed = std::mem::take(&mut self.confirmed);
+        let near_followed = |xy: Vector2<f64>| {
+            let last_seen_here = followed.iter().any(|(at, _)| (at - xy).norm() <= cfg.follow_radius_m);
+            let theirs = followed
+                .iter()
+                .filter(|(at, t)| {
+                    let age_s = (now_ns - t) as f64 * 1e-9;
+                    (at - xy).norm() <= cfg.follow_radius_m + cfg.follow_walk_mps * age_s
+                })
+                .count();
+            last_seen_here && theirs >= cfg.follow_min_confirmations
+        };
+        let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
         let sensor = window.sensor_pose.translation.vector;
         let floor = estimate_floor(window.points, sensor.z, cfg);
         self.last_floor = Some(floor);
@@ -127,9 +147,10 @@ impl Detector for GeometricDetector {
             let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m) else {
                 continue;
             };
-            let (pose, mut s) = score(&f, cfg);
+            let (mut pose, mut s) = score(&f, cfg);
             // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
-            if f.top_m > top - CEILING_CONTACT_M {
+            let structure = f.top_m > top - CEILING_CONTACT_M;
+            if structure {
                 s = 0.0;
             }
             if self.keep_cluster_points {
@@ -145,6 +166,13 @@ impl Detector for GeometricDetector {
                 if env.cuts(points, grid.points_of_cluster(&cluster), cfg.fov_edge_margin_deg) {
                     s = 0.0;
                 }
+            }
+            let xy = Vector2::new(f.centre.x, f.centre.y);
+            if s >= cfg.min_score {
+                confirmed_now.push((xy, now_ns));
+            } else if !structure && follow_ns > 0 && near_followed(xy) {
+                // Someone every gate saw here moments ago: judged as a partial view of them.
+                (pose, s) = score_with_face_share(&f, cfg, cfg.follow_max_face_share);
             }
             if s >= cfg.min_score {
                 let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;
@@ -172,6 +200,8 @@ impl Detector for GeometricDetector {
                 stack.extend(split(&grid, &cluster, cfg, depth));
             }
         }
+        self.confirmed = followed;
+        self.confirmed.extend(confirmed_now);
     }
 }
 
