@@ -26,12 +26,19 @@ pub fn cloud_points(cloud: &PointCloud) -> Vec<Vec3> {
 
 /// One point per occupied voxel (the centroid), in a deterministic order (sorted by voxel).
 pub fn voxel_downsample(points: &[Vec3], voxel_m: f64) -> Vec<Vec3> {
+    voxel_downsample_every(points, voxel_m, 1)
+}
+
+/// [`voxel_downsample`] of every `stride`-th point (a window of millions of returns puts dozens
+/// in every voxel of the ICP's size: a share of them gives the same voxels for a share of the
+/// time).
+pub fn voxel_downsample_every(points: &[Vec3], voxel_m: f64, stride: usize) -> Vec<Vec3> {
     if voxel_m.is_nan() || voxel_m <= 0.0 {
         return points.to_vec();
     }
     let inv = 1.0 / voxel_m;
     let mut sums: KeyMap<(Vec3, u32)> = KeyMap::default();
-    for p in points {
+    for p in points.iter().step_by(stride.max(1)) {
         let e = sums.entry(key_of(p, inv)).or_insert((Vec3::zeros(), 0));
         e.0 += p;
         e.1 += 1;

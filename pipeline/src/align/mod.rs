@@ -24,8 +24,8 @@ mod tiles;
 pub use config::AlignConfig;
 pub use free_space::{FreeSpace, Ray};
 pub use geometry::{
-    cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample, Vec3,
-    VoxelIndex,
+    cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample,
+    voxel_downsample_every, Vec3, VoxelIndex,
 };
 pub use map::{
     aggregate_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig, PreparedMap,

@@ -3,7 +3,7 @@
 
 use super::config::AlignConfig;
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
-use super::geometry::{estimate_normals, pose_rows, voxel_downsample, Vec3, VoxelIndex};
+use super::geometry::{estimate_normals, pose_rows, voxel_downsample, voxel_downsample_every, Vec3, VoxelIndex};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
 use crate::PipelineError;
@@ -198,7 +198,8 @@ impl Aligner {
             &Isometry3::from_parts(initial.translation, UnitQuaternion::new_normalize(*initial.rotation.quaternion()));
         let t0 = Instant::now();
         // Finest reduction first; the coarser ones are taken from it (cheaper than from the raw scan).
-        let icp_source = voxel_downsample(source, c.icp_voxel_m);
+        let stride = if c.source_max_points == 0 { 1 } else { source.len().div_ceil(c.source_max_points).max(1) };
+        let icp_source = voxel_downsample_every(source, c.icp_voxel_m, stride);
         let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
         let source_reduce_ms = ms_since(t0);
         let first_level = self.first_level(&ndt_source);

@@ -62,6 +62,35 @@ fn real_pair_from_far_starts_with_reseeding() {
     perturbed_starts(&aligner, &source, &truth, &[(90.0, 0.0, 1.5), (180.0, 2.0, 0.0)]);
 }
 
+#[test]
+fn a_source_capped_to_a_third_of_its_points_still_aligns() {
+    let Some((source, target, truth)) = real_pair() else { return };
+    let config = AlignConfig { source_max_points: source.len() / 3, ..AlignConfig::default() };
+    let aligner = Aligner::new(&target, config).unwrap();
+    let report = aligner.align(&source, &Isometry3::identity());
+    assert_close(&report, &truth, "a third of the points");
+    let all = Aligner::new(&target, AlignConfig::default()).unwrap().align(&source, &Isometry3::identity());
+    assert!(report.source_points < all.source_points, "fewer points reach fewer voxels");
+    assert!(
+        report.source_points * 2 > all.source_points,
+        "but most of them: {} of {}",
+        report.source_points,
+        all.source_points
+    );
+}
+
+#[test]
+fn voxel_downsample_every_nth_point() {
+    let points: Vec<Vec3> =
+        (0..1000).map(|i| Vec3::new(f64::from(i % 10) * 0.01, f64::from(i / 10) * 0.01, 0.0)).collect();
+    assert_eq!(voxel_downsample_every(&points, 0.5, 1), voxel_downsample(&points, 0.5));
+    // 1 m x 0.1 m of points, 0.5 m voxels: both voxels from every 7th point, from the same centroids roughly.
+    let every7 = voxel_downsample_every(&points, 0.5, 7);
+    assert_eq!(every7.len(), 2);
+    assert!(every7.iter().zip(voxel_downsample(&points, 0.5)).all(|(a, b)| (a - b).norm() < 0.02));
+    assert_eq!(voxel_downsample_every(&points, 0.5, 0), voxel_downsample(&points, 0.5), "0 is every point");
+}
+
 /// Starts off the truth by a yaw about the true position (reseeding does the large ones) and a shift.
 fn perturbed_starts(aligner: &Aligner, source: &[Vec3], truth: &Isometry3<f64>, starts: &[(f64, f64, f64)]) {
     for &(yaw_deg, dx_m, dy_m) in starts {
