@@ -2,6 +2,8 @@
 //! sighting, held for a while after the robot last saw them, with their age. A person is drawn
 //! once confirmed: seen in two detection windows within `CONFIRM_NS` of each other (a single
 //! window's false positive, held for a second, would otherwise stand on screen where no one is).
+//! A person seen moving is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
+//! they were last seen, their points no longer show where they are.
 
 use crate::ar::ArPerson;
 use std::collections::VecDeque;
@@ -10,6 +12,11 @@ use std::collections::VecDeque;
 const SAME_PERSON_M: f64 = 0.7;
 /// Two sightings of one person at most this far apart confirm them.
 const CONFIRM_NS: u64 = 500_000_000;
+/// A person is drawn at their last sighting while their speed times its age is at most this
+/// (a body's half width: beyond it, most of the drawn points miss them).
+const MAX_DRIFT_M: f64 = 0.25;
+/// Speeds are measured over at least this long (a centre jitters by centimetres per window).
+const MIN_SPEED_BASELINE_NS: u64 = 200_000_000;
 
 struct Shown {
     stamp_ns: u64,
@@ -32,7 +39,9 @@ impl Overlay {
         // Arrivals may be out of order over the link: keep them sorted by stamp.
         let at = self.shown.iter().rposition(|s| s.stamp_ns <= stamp_ns).map_or(0, |i| i + 1);
         self.shown.insert(at, Shown { stamp_ns, people });
-        while self.shown.front().is_some_and(|s| s.stamp_ns.saturating_add(self.hold_ns) < stamp_ns) {
+        // Kept past the hold for as long as they confirm or time the held ones.
+        let keep_ns = self.hold_ns.saturating_add(CONFIRM_NS);
+        while self.shown.front().is_some_and(|s| s.stamp_ns.saturating_add(keep_ns) < stamp_ns) {
             self.shown.pop_front();
         }
     }
@@ -42,16 +51,25 @@ impl Overlay {
         self.shown.back().map(|s| s.stamp_ns)
     }
 
-    /// Everyone seen in the `hold_ns` up to `t_ns`, each at their latest sighting, aged.
+    /// Everyone seen in the `hold_ns` up to `t_ns`, each at their latest sighting, aged; people
+    /// seen moving only while they cannot have walked `MAX_DRIFT_M` since.
     pub fn at(&self, t_ns: u64) -> Vec<ArPerson> {
         let mut out: Vec<ArPerson> = Vec::new();
+        // Latest sightings not drawn: their person's older sightings are not drawn either.
+        let mut dropped: Vec<nalgebra::Vector3<f64>> = Vec::new();
         for s in self.shown.iter().rev().filter(|s| s.stamp_ns <= t_ns && s.stamp_ns + self.hold_ns >= t_ns) {
             for p in &s.people {
                 let Some(b) = p.bbox else { continue };
-                let seen =
-                    out.iter().any(|q| q.bbox.is_some_and(|c| (c.centre_m - b.centre_m).xy().norm() < SAME_PERSON_M));
-                if !seen && self.confirmed(s.stamp_ns, &b.centre_m) {
-                    out.push(ArPerson { age_ns: t_ns - s.stamp_ns, ..p.clone() });
+                let near = |c: &nalgebra::Vector3<f64>| (c - b.centre_m).xy().norm() < SAME_PERSON_M;
+                let seen = out.iter().any(|q| q.bbox.is_some_and(|c| near(&c.centre_m))) || dropped.iter().any(near);
+                if seen || !self.confirmed(s.stamp_ns, &b.centre_m) {
+                    continue;
+                }
+                let age_ns = t_ns - s.stamp_ns;
+                if self.speed_mps(s.stamp_ns, &b.centre_m) * age_ns as f64 * 1e-9 > MAX_DRIFT_M {
+                    dropped.push(b.centre_m);
+                } else {
+                    out.push(ArPerson { age_ns, ..p.clone() });
                 }
             }
         }
@@ -67,6 +85,23 @@ impl Overlay {
             .iter()
             .filter(|s| s.stamp_ns < stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
             .any(|s| s.people.iter().filter_map(|p| p.bbox).any(|b| (b.centre_m - centre).xy().norm() < SAME_PERSON_M))
+    }
+
+    /// Floor speed of the person seen at `centre` at `stamp_ns`, from their earliest sighting
+    /// in the `CONFIRM_NS` before it at least `MIN_SPEED_BASELINE_NS` earlier (0 when none).
+    fn speed_mps(&self, stamp_ns: u64, centre: &nalgebra::Vector3<f64>) -> f64 {
+        self.shown
+            .iter()
+            .filter(|s| s.stamp_ns + MIN_SPEED_BASELINE_NS <= stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
+            .find_map(|s| {
+                let b = s
+                    .people
+                    .iter()
+                    .filter_map(|p| p.bbox)
+                    .find(|b| (b.centre_m - centre).xy().norm() < SAME_PERSON_M)?;
+                Some((b.centre_m - centre).xy().norm() / ((stamp_ns - s.stamp_ns) as f64 * 1e-9))
+            })
+            .unwrap_or(0.0)
     }
 }
 
@@ -112,6 +147,27 @@ mod tests {
         assert!(o.at(1_000_000_000).is_empty());
         o.push(1_100_000_000, vec![person(0.2)]);
         assert_eq!(o.at(1_100_000_000).len(), 1, "confirmed by the window before");
+    }
+
+    #[test]
+    fn a_walker_is_dropped_once_they_may_have_walked_away_and_a_standing_person_is_held() {
+        const MS: u64 = 1_000_000;
+        let mut o = Overlay::new(1_000 * MS);
+        // A walker at 1.4 m/s and a person standing 5 m away, seen every 100 ms to 500 ms.
+        for k in 1..=5u32 {
+            o.push(u64::from(k) * 100 * MS, vec![person(0.14 * f64::from(k)), person(5.0 + 0.01 * f64::from(k % 2))]);
+        }
+        let walker = |o: &Overlay, t_ms: u64| {
+            o.at(t_ms * MS).iter().filter(|p| p.bbox.is_some_and(|b| b.centre_m.x < 2.0)).count()
+        };
+        assert_eq!(walker(&o, 600), 1, "0.14 m since their last sighting");
+        assert_eq!(walker(&o, 700), 0, "0.28 m: no longer where they were drawn");
+        assert_eq!(walker(&o, 1_400), 0, "nor at an older sighting");
+        // Later detections without the walker do not make them stand still.
+        o.push(1_200 * MS, vec![person(5.0)]);
+        o.push(1_450 * MS, vec![person(5.0)]);
+        assert_eq!(walker(&o, 1_450), 0, "their speed outlives the sightings it was measured on");
+        assert_eq!(o.at(1_400 * MS).len(), 1, "the standing person is held for the whole second");
     }
 
     #[test]
