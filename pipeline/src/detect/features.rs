@@ -18,8 +18,9 @@ pub struct ClusterFeatures {
     /// Lowest and highest point above the floor.
     pub bottom_m: f64,
     pub top_m: f64,
-    /// Share of the points within the face tolerance of a side of the box (not the top: the
-    /// field of view cuts people seen up close flat at the top).
+    /// Share of the points within the face tolerance of a side of the box, turned to the heading
+    /// (3 deg steps) that puts the most points there (not the top: the field of view cuts people
+    /// seen up close flat at the top).
     pub face_share: f64,
     /// Share of the points within the face tolerance of the top alone (a box's flat top).
     pub top_share: f64,
@@ -37,6 +38,9 @@ pub struct ClusterFeatures {
 /// Distance of a voxel centre to a side of the rectangle to count as on it (centres sit up to
 /// half a voxel inside a face).
 const EDGE_TOLERANCE_M: f64 = 0.06;
+
+/// The face share is the largest over headings this far apart around the quarter turn.
+const FACE_YAW_STEP_DEG: f64 = 3.0;
 
 /// Variance ratio of the footprint's axes above which its major axis sets the heading.
 const ELONGATED_RATIO: f64 = 4.0;
@@ -61,6 +65,16 @@ fn major_axis(centres: &[Vector3<f64>]) -> Option<(f64, f64)> {
     let (major, minor) = (half_trace + disc, half_trace - disc);
     let yaw = 0.5 * (2.0 * sxy).atan2(sxx - syy);
     (minor > 1e-12).then_some((yaw, major / minor)).or(Some((yaw, f64::MAX))).filter(|_| major > 0.0)
+}
+
+/// The 2nd and 98th percentiles of `v` (0 when empty).
+fn quantiles(mut v: Vec<f64>) -> (f64, f64) {
+    let Some(last) = v.len().checked_sub(1) else { return (0.0, 0.0) };
+    let mut at = |f: f64| {
+        let i = ((last as f64 * f).round() as usize).min(last);
+        *v.select_nth_unstable_by(i, f64::total_cmp).1
+    };
+    (at(0.02), at(0.98))
 }
 
 /// `points` maps a window index to (x, y, height above floor).
@@ -143,27 +157,32 @@ pub fn features(
     // Points on a side (the top may be the field of view's edge, the bottom is cut by the floor
     // band), against faces placed at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
     // outside it, and the extremes would move the faces off the bulk.
-    // The faces are those of the edge frame: a box's own.
-    let (es, ec) = edge_yaw.sin_cos();
-    let local = |p: &Vector3<f64>| Vector3::new(ec * p.x + es * p.y, -es * p.x + ec * p.y, p.z);
+    // The faces are those of the heading that puts the most points on them: a box's own. The
+    // edge frame alone is not enough: seen through the LIO's poses, a wall end's L flickered
+    // between 0.35 and 0.9 from one window to the next (the tactical house's front door).
     let stride = (raw.len() / 600).max(1);
-    let sample: Vec<Vector3<f64>> = raw.iter().step_by(stride).map(local).collect();
-    let quantiles = |axis: usize| {
-        let mut v: Vec<f64> = sample.iter().map(|q| q[axis]).collect();
-        v.sort_unstable_by(f64::total_cmp);
-        let at = |f: f64| v.get(((v.len() - 1) as f64 * f).round() as usize).copied().unwrap_or(0.0);
-        (at(0.02), at(0.98))
+    let face_counts = |yaw: f64| {
+        let (es, ec) = yaw.sin_cos();
+        let sample: Vec<Vector3<f64>> =
+            raw.iter().step_by(stride).map(|p| Vector3::new(ec * p.x + es * p.y, -es * p.x + ec * p.y, p.z)).collect();
+        let (x0, x1) = quantiles(sample.iter().map(|q| q.x).collect());
+        let (y0, y1) = quantiles(sample.iter().map(|q| q.y).collect());
+        let on = sample
+            .iter()
+            .filter(|q| {
+                let d = (q.x - x0).abs().min((x1 - q.x).abs()).min((q.y - y0).abs()).min((y1 - q.y).abs());
+                d < face_tolerance_m
+            })
+            .count();
+        (on, sample.len())
     };
-    let ((x0, x1), (y0, y1), (_, z1)) = (quantiles(0), quantiles(1), quantiles(2));
-    let on = sample
-        .iter()
-        .filter(|q| {
-            let d = (q.x - x0).abs().min((x1 - q.x).abs()).min((q.y - y0).abs()).min((y1 - q.y).abs());
-            d < face_tolerance_m
-        })
-        .count();
-    let seen = sample.len();
-    let on_top = sample.iter().filter(|q| (z1 - q.z).abs() < face_tolerance_m).count();
+    let steps = (90.0 / FACE_YAW_STEP_DEG).round() as i32;
+    let (on, seen) = (0..steps)
+        .map(|k| face_counts(edge_yaw + (f64::from(k) * FACE_YAW_STEP_DEG).to_radians()))
+        .max_by_key(|c| c.0)
+        .unwrap_or((0, 0));
+    let (_, z1) = quantiles(raw.iter().step_by(stride).map(|p| p.z).collect());
+    let on_top = raw.iter().step_by(stride).filter(|p| (z1 - p.z).abs() < face_tolerance_m).count();
     // Thickness from the raw points (the voxel centres are smoothed).
     let rn = raw.iter().step_by(stride).count().max(1) as f64;
     let rmean = raw.iter().step_by(stride).sum::<Vector3<f64>>() / rn;

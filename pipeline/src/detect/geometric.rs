@@ -168,6 +168,20 @@ impl Detector for GeometricDetector {
                 }
             }
             let xy = Vector2::new(f.centre.x, f.centre.y);
+            tracing::trace!(
+                stamp_ns = now_ns,
+                x_m = f.centre.x,
+                y_m = f.centre.y,
+                size_m = ?[f.size.x, f.size.y, f.size.z],
+                top_m = f.top_m,
+                points = f.points,
+                face_share = f.face_share,
+                thickness_m = f.thickness_m,
+                planarity = f.planarity,
+                linearity = f.linearity,
+                score = s,
+                "cluster scored"
+            );
             if s >= cfg.min_score {
                 confirmed_now.push((xy, now_ns));
             } else if !structure && follow_ns > 0 && near_followed(xy) {
