@@ -35,11 +35,21 @@ const LYING_HEIGHT_SOFT_M: f64 = 0.05;
 
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
-    score_with_face_share(f, cfg, cfg.max_face_share)
+    score_with(f, cfg, cfg.max_face_share, cfg.lying_length_m[0])
 }
 
-/// [`score`] with another largest face share (the face gate of a person already followed).
-pub fn score_with_face_share(f: &ClusterFeatures, cfg: &DetectConfig, max_face_share: f64) -> (PersonPose, f64) {
+/// [`score`] of a person already followed: the gates a partial view fails are those of
+/// `follow_max_face_share` and `follow_lying_min_length_m`.
+pub fn score_followed(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
+    score_with(f, cfg, cfg.follow_max_face_share, cfg.follow_lying_min_length_m.min(cfg.lying_length_m[0]))
+}
+
+fn score_with(
+    f: &ClusterFeatures,
+    cfg: &DetectConfig,
+    max_face_share: f64,
+    lying_min_length_m: f64,
+) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
     // Boxes and slabs: standing or sitting people are thicker than a face and not boxy. (A
     // lying body is low and round: most of its points are near its box's faces anyway.) With
@@ -73,7 +83,7 @@ pub fn score_with_face_share(f: &ClusterFeatures, cfg: &DetectConfig, max_face_s
         * band(width, min_width, 0.7, 0.03);
     let lying = not_flat
         * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], LYING_HEIGHT_SOFT_M)
-        * band(length, cfg.lying_length_m[0], cfg.lying_length_m[1], 0.15)
+        * band(length, lying_min_length_m, cfg.lying_length_m[1], 0.15)
         * band(width, 0.15, cfg.lying_max_width_m, 0.1)
         * band(f.bottom_m, f64::MIN, 0.3, 0.1);
     let (pose, shape) =

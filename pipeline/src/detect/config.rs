@@ -83,6 +83,9 @@ pub struct DetectConfig {
     pub follow_walk_mps: f64,
     pub follow_radius_m: f64,
     pub follow_max_face_share: f64,
+    /// ... or a lying body shorter than `lying_length_m[0]` down to this (cut by the side of the
+    /// view as the robot turns away).
+    pub follow_lying_min_length_m: f64,
 }
 
 impl Default for DetectConfig {
@@ -119,6 +122,7 @@ impl Default for DetectConfig {
             follow_walk_mps: 1.5,
             follow_radius_m: 0.4,
             follow_max_face_share: 0.75,
+            follow_lying_min_length_m: 0.5,
         }
     }
 }
@@ -178,6 +182,9 @@ impl DetectConfig {
         }
         if !(self.follow_radius_m.is_finite() && (0.0..=2.0).contains(&self.follow_radius_m)) {
             return Err(bad("follow_radius_m must be between 0 and 2"));
+        }
+        if !(self.follow_lying_min_length_m.is_finite() && self.follow_lying_min_length_m >= 0.0) {
+            return Err(bad("follow_lying_min_length_m must be finite and not negative"));
         }
         if !(self.follow_max_face_share >= 0.0 && self.follow_max_face_share <= 1.0) {
             return Err(bad("follow_max_face_share must be in [0, 1]"));

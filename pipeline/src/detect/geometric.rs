@@ -1,7 +1,7 @@
 //! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
 //! clusters, each cluster scored as a person.
 
-use super::classify::{score, score_with_face_share, tallest_scorable_m, too_big};
+use super::classify::{score, score_followed, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
@@ -186,7 +186,7 @@ impl Detector for GeometricDetector {
                 confirmed_now.push((xy, now_ns));
             } else if !structure && follow_ns > 0 && near_followed(xy) {
                 // Someone every gate saw here moments ago: judged as a partial view of them.
-                (pose, s) = score_with_face_share(&f, cfg, cfg.follow_max_face_share);
+                (pose, s) = score_followed(&f, cfg);
             }
             if s >= cfg.min_score {
                 let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;

@@ -141,6 +141,7 @@ fn the_shipped_config_loads_and_bad_ones_are_refused() {
     assert!(DetectConfig::from_toml("min_score = 1.5").is_err());
     assert!(DetectConfig::from_toml("follow_s = -1.0").is_err());
     assert!(DetectConfig::from_toml("follow_max_face_share = 2.0").is_err());
+    assert!(DetectConfig::from_toml("follow_lying_min_length_m = -0.5").is_err());
 }
 
 #[test]
@@ -324,4 +325,31 @@ fn a_smeared_wall_end_is_all_faces_and_no_one() {
     assert!(found.is_empty(), "{found:#?}");
     let (f, _) = det.last_clusters().iter().find(|(f, _)| f.size.z > 1.3).expect("the wall end is scored");
     assert!(f.face_share > 0.7, "{f:?}");
+}
+
+#[test]
+fn a_followed_lying_person_may_be_shorter_than_a_lying_person_alone() {
+    use super::classify::{score, score_followed};
+    // A lying body 0.8 m long (the rest out of the side of the view), 0.5 m wide, 0.18 m high.
+    let f = ClusterFeatures {
+        points: 2000,
+        voxels: 80,
+        centre: Vector3::new(5.0, 0.0, 0.1),
+        size: Vector3::new(0.8, 0.5, 0.18),
+        yaw_rad: 0.0,
+        bottom_m: 0.06,
+        top_m: 0.24,
+        face_share: 0.35,
+        top_share: 0.05,
+        linearity: 0.75,
+        planarity: 0.22,
+        thickness_m: 0.03,
+        range_m: 5.0,
+    };
+    let cfg = DetectConfig::default();
+    assert!(score(&f, &cfg).1 < cfg.min_score, "{:?}", score(&f, &cfg));
+    assert_eq!(score_followed(&f, &cfg).0, PersonPose::Lying);
+    assert!(score_followed(&f, &cfg).1 >= cfg.min_score);
+    let short = ClusterFeatures { size: Vector3::new(0.3, 0.3, 0.18), ..f };
+    assert!(score_followed(&short, &cfg).1 < cfg.min_score, "a 0.3 m stub is no one");
 }
