@@ -74,10 +74,10 @@ pub struct DetectConfig {
     /// within `follow_radius_m` of where they were, in a later window, that fails only what a
     /// partial view fails (a face share up to `follow_max_face_share`, a top cut by the field of
     /// view) is still that person. Only full confirmations extend the time, so a track never
-    /// lives on its own continuations. A person is followed once every gate has confirmed them
-    /// `follow_min_confirmations` times in that time (one window's fluke is not), counting a
-    /// confirmation as theirs when it lies within `follow_radius_m` plus a walk at
-    /// `follow_walk_mps` since it.
+    /// lives on its own continuations. A person is followed when every gate has confirmed them
+    /// `follow_min_confirmations` times in the last 2 x `follow_s` (one window's fluke is not),
+    /// the last time within `follow_s`, counting a confirmation as theirs when it lies within
+    /// `follow_radius_m` plus a walk at `follow_walk_mps` since it.
     pub follow_s: f64,
     pub follow_min_confirmations: usize,
     pub follow_walk_mps: f64,

@@ -83,10 +83,13 @@ impl Detector for GeometricDetector {
         let now_ns = window.stamp.ns;
         let follow_ns = (cfg.follow_s * 1e9) as u64;
         // A window older than one already seen (a replay restarted) follows nobody.
-        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= follow_ns);
+        // Confirmations are kept twice as long as a person is followed: all of them count
+        // towards the track, the last one starts the time it is followed for.
+        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
         let followed = std::mem::take(&mut self.confirmed);
         let near_followed = |xy: Vector2<f64>| {
-            let last_seen_here = followed.iter().any(|(at, _)| (at - xy).norm() <= cfg.follow_radius_m);
+            let last_seen_here =
+                followed.iter().any(|(at, t)| now_ns - t <= follow_ns && (at - xy).norm() <= cfg.follow_radius_m);
             let theirs = followed
                 .iter()
                 .filter(|(at, t)| {

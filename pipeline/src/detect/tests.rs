@@ -267,6 +267,9 @@ fn a_confirmed_person_is_followed_into_a_partial_view_for_a_while() {
     assert!(crouching_found(&mut det, false, S + S / 2), "followed");
     // Continuations do not extend the time: 1 s after the last confirmation, no longer.
     assert!(crouching_found(&mut det, false, S + 9 * S / 10));
+    // Still theirs 0.9 s after the last confirmation, though the first four are more than a
+    // second old by then: the track counts the last 2 s of confirmations.
+    assert!(crouching_found(&mut det, false, S + 13 * S / 10), "an established track is followed");
     assert!(!crouching_found(&mut det, false, S + 14 * S / 10 + 1), "followed too long");
 
     // Twice is not enough (a fluke), and following can be turned off.
