@@ -77,6 +77,19 @@ fn quantiles(mut v: Vec<f64>) -> (f64, f64) {
     (at(0.02), at(0.98))
 }
 
+/// How many of `points` lie within `tolerance_m` of a side of their box turned to `yaw`, the
+/// sides at the 2nd and 98th percentiles.
+fn on_faces(points: &[Vector3<f64>], yaw: f64, tolerance_m: f64) -> usize {
+    let (s, c) = yaw.sin_cos();
+    let local: Vec<(f64, f64)> = points.iter().map(|p| (c * p.x + s * p.y, -s * p.x + c * p.y)).collect();
+    let (x0, x1) = quantiles(local.iter().map(|q| q.0).collect());
+    let (y0, y1) = quantiles(local.iter().map(|q| q.1).collect());
+    local
+        .iter()
+        .filter(|(x, y)| (x - x0).abs().min((x1 - x).abs()).min((y - y0).abs()).min((y1 - y).abs()) < tolerance_m)
+        .count()
+}
+
 /// `points` maps a window index to (x, y, height above floor).
 pub fn features(
     grid: &Grid,
@@ -160,38 +173,23 @@ pub fn features(
     // The faces are those of the heading that puts the most points on them: a box's own. The
     // edge frame alone is not enough: seen through the LIO's poses, a wall end's L flickered
     // between 0.35 and 0.9 from one window to the next (the tactical house's front door).
-    let stride = (raw.len() / 600).max(1);
+    let sample: Vec<Vector3<f64>> = raw.iter().step_by((raw.len() / 600).max(1)).copied().collect();
     // The heading is searched on half the sample (the search on the whole of it cost a third of
     // the detector's time), the share measured on all of it.
-    let face_counts = |yaw: f64, stride: usize| {
-        let (es, ec) = yaw.sin_cos();
-        let sample: Vec<Vector3<f64>> =
-            raw.iter().step_by(stride).map(|p| Vector3::new(ec * p.x + es * p.y, -es * p.x + ec * p.y, p.z)).collect();
-        let (x0, x1) = quantiles(sample.iter().map(|q| q.x).collect());
-        let (y0, y1) = quantiles(sample.iter().map(|q| q.y).collect());
-        let on = sample
-            .iter()
-            .filter(|q| {
-                let d = (q.x - x0).abs().min((x1 - q.x).abs()).min((q.y - y0).abs()).min((y1 - q.y).abs());
-                d < face_tolerance_m
-            })
-            .count();
-        (on, sample.len())
-    };
+    let search: Vec<Vector3<f64>> = raw.iter().step_by((raw.len() / 300).max(1)).copied().collect();
     let steps = (90.0 / FACE_YAW_STEP_DEG).round() as i32;
     let face_yaw = (0..steps)
         .map(|k| edge_yaw + (f64::from(k) * FACE_YAW_STEP_DEG).to_radians())
-        .map(|yaw| (yaw, face_counts(yaw, (raw.len() / 300).max(1)).0))
-        .max_by_key(|c| c.1)
-        .map_or(edge_yaw, |c| c.0);
-    let (on, seen) = face_counts(face_yaw, stride);
-    let (_, z1) = quantiles(raw.iter().step_by(stride).map(|p| p.z).collect());
-    let on_top = raw.iter().step_by(stride).filter(|p| (z1 - p.z).abs() < face_tolerance_m).count();
+        .max_by_key(|&yaw| on_faces(&search, yaw, face_tolerance_m))
+        .unwrap_or(edge_yaw);
+    let (on, seen) = (on_faces(&sample, face_yaw, face_tolerance_m), sample.len());
+    let (_, z1) = quantiles(sample.iter().map(|p| p.z).collect());
+    let on_top = sample.iter().filter(|p| (z1 - p.z).abs() < face_tolerance_m).count();
     // Thickness from the raw points (the voxel centres are smoothed).
-    let rn = raw.iter().step_by(stride).count().max(1) as f64;
-    let rmean = raw.iter().step_by(stride).sum::<Vector3<f64>>() / rn;
+    let rn = sample.len().max(1) as f64;
+    let rmean = sample.iter().sum::<Vector3<f64>>() / rn;
     let mut rcov = Matrix3::zeros();
-    for p in raw.iter().step_by(stride) {
+    for p in &sample {
         let q = p - rmean;
         rcov += q * q.transpose();
     }

@@ -6,6 +6,7 @@
 //! they were last seen, their points no longer show where they are.
 
 use crate::ar::ArPerson;
+use nalgebra::Vector3;
 use std::collections::VecDeque;
 
 /// A later sighting this close (m, in the floor plane) to an earlier one is the same person.
@@ -56,13 +57,14 @@ impl Overlay {
     pub fn at(&self, t_ns: u64) -> Vec<ArPerson> {
         let mut out: Vec<ArPerson> = Vec::new();
         // Latest sightings not drawn: their person's older sightings are not drawn either.
-        let mut dropped: Vec<nalgebra::Vector3<f64>> = Vec::new();
+        let mut dropped: Vec<Vector3<f64>> = Vec::new();
         for s in self.shown.iter().rev().filter(|s| s.stamp_ns <= t_ns && s.stamp_ns + self.hold_ns >= t_ns) {
             for p in &s.people {
                 let Some(b) = p.bbox else { continue };
-                let near = |c: &nalgebra::Vector3<f64>| (c - b.centre_m).xy().norm() < SAME_PERSON_M;
-                let seen = out.iter().any(|q| q.bbox.is_some_and(|c| near(&c.centre_m))) || dropped.iter().any(near);
-                if seen || !self.confirmed(s.stamp_ns, &b.centre_m) {
+                let seen = out.iter().filter_map(|q| q.bbox).any(|c| same_person(&c.centre_m, &b.centre_m))
+                    || dropped.iter().any(|c| same_person(c, &b.centre_m));
+                // Confirmed by an earlier sighting in the `CONFIRM_NS` before this one.
+                if seen || self.earlier_sighting(s.stamp_ns, 1, &b.centre_m).is_none() {
                     continue;
                 }
                 let age_ns = t_ns - s.stamp_ns;
@@ -75,34 +77,30 @@ impl Overlay {
         }
         out
     }
+
+    /// The earliest sighting near `centre` in the `CONFIRM_NS` before `stamp_ns` and at least
+    /// `min_gap_ns` before it: its stamp and centre.
+    fn earlier_sighting(&self, stamp_ns: u64, min_gap_ns: u64, centre: &Vector3<f64>) -> Option<(u64, Vector3<f64>)> {
+        self.shown
+            .iter()
+            .filter(|s| s.stamp_ns + min_gap_ns <= stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
+            .find_map(|s| {
+                let b = s.people.iter().filter_map(|p| p.bbox).find(|b| same_person(&b.centre_m, centre))?;
+                Some((s.stamp_ns, b.centre_m))
+            })
+    }
+
+    /// Floor speed of the person seen at `centre` at `stamp_ns`, over at least
+    /// `MIN_SPEED_BASELINE_NS` (0 when they were not seen that long before).
+    fn speed_mps(&self, stamp_ns: u64, centre: &Vector3<f64>) -> f64 {
+        self.earlier_sighting(stamp_ns, MIN_SPEED_BASELINE_NS, centre)
+            .map_or(0.0, |(t, at)| (at - centre).xy().norm() / ((stamp_ns - t) as f64 * 1e-9))
+    }
 }
 
-impl Overlay {
-    /// Whether someone was also seen near `centre` in an earlier window at most `CONFIRM_NS`
-    /// before `stamp_ns`.
-    fn confirmed(&self, stamp_ns: u64, centre: &nalgebra::Vector3<f64>) -> bool {
-        self.shown
-            .iter()
-            .filter(|s| s.stamp_ns < stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
-            .any(|s| s.people.iter().filter_map(|p| p.bbox).any(|b| (b.centre_m - centre).xy().norm() < SAME_PERSON_M))
-    }
-
-    /// Floor speed of the person seen at `centre` at `stamp_ns`, from their earliest sighting
-    /// in the `CONFIRM_NS` before it at least `MIN_SPEED_BASELINE_NS` earlier (0 when none).
-    fn speed_mps(&self, stamp_ns: u64, centre: &nalgebra::Vector3<f64>) -> f64 {
-        self.shown
-            .iter()
-            .filter(|s| s.stamp_ns + MIN_SPEED_BASELINE_NS <= stamp_ns && s.stamp_ns + CONFIRM_NS >= stamp_ns)
-            .find_map(|s| {
-                let b = s
-                    .people
-                    .iter()
-                    .filter_map(|p| p.bbox)
-                    .find(|b| (b.centre_m - centre).xy().norm() < SAME_PERSON_M)?;
-                Some((b.centre_m - centre).xy().norm() / ((stamp_ns - s.stamp_ns) as f64 * 1e-9))
-            })
-            .unwrap_or(0.0)
-    }
+/// Whether two sightings' centres are one person's.
+fn same_person(a: &Vector3<f64>, b: &Vector3<f64>) -> bool {
+    (a - b).xy().norm() < SAME_PERSON_M
 }
 
 #[cfg(test)]
