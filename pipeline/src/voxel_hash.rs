@@ -54,12 +54,35 @@ impl VoxelHasher {
     }
 }
 
+/// `v.floor() as i32`, the same for every input (saturating, NaN to 0), without a call: the
+/// x86-64 baseline has no SSE4.1 `roundsd`, so `floor` is a libm call, and voxel keys take
+/// three per point (a few percent of the mission's CPU time in perf).
+#[inline]
+pub fn floor_i32(v: f64) -> i32 {
+    let t = v as i32;
+    if f64::from(t) > v {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
 pub type VoxelHashMap<K, V> = HashMap<K, V, BuildHasherDefault<VoxelHasher>>;
 pub type VoxelHashSet<K> = HashSet<K, BuildHasherDefault<VoxelHasher>>;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_i32_is_floor_then_cast() {
+        let edges = [0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 1e-300, -1e-300, 2147483647.5, -2147483648.5, 3e9, -3e9];
+        let specials = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, f64::MAX, f64::MIN, f64::EPSILON];
+        let steps = (-2000..2000).map(|i| f64::from(i) * 0.0137);
+        for v in edges.into_iter().chain(specials).chain(steps) {
+            assert_eq!(floor_i32(v), v.floor() as i32, "{v}");
+        }
+    }
 
     #[test]
     fn neighbouring_keys_spread_over_buckets() {

@@ -120,6 +120,7 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
     let mut overlay = Overlay::new(HOLD_NS);
     let (mut robot_tum, mut rig_tum, mut world_tum) = (Vec::new(), Vec::new(), Vec::new());
     let (mut slam_ms, mut viz_ms) = (Vec::new(), Vec::new());
+    let (mut lio_ms, mut detect_ms) = (Vec::new(), Vec::new());
     let mut hint_set = false;
     if let Start::At(p) = run.start {
         rig.set_start_hint(p);
@@ -148,8 +149,10 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
             robot_last_ns = o.end_ns;
             robot_tum.push(tum_line(o.end_ns, &o.lidar_pose));
             let mut ms = o.elapsed_us as f64 * 1e-3;
+            lio_ms.push(ms);
             if let Some(det) = step.detection {
                 ms += det.detect_ms;
+                detect_ms.push(det.detect_ms);
                 detection_windows += 1;
                 people_detected += det.found.len();
                 if let Some(sc) = score.as_mut() {
@@ -241,6 +244,14 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
     write_tum(out, "rig.tum", &rig_tum)?;
     write_tum(out, "rig_world.tum", &world_tum)?;
     let viz_p50 = quantiles(&viz_ms).p50;
+    let (lq, dq) = (super::mission_score::quantiles(&lio_ms), super::mission_score::quantiles(&detect_ms));
+    tracing::info!(
+        lio_p50_ms = lq.p50,
+        lio_p99_ms = lq.p99,
+        detect_p50_ms = dq.p50,
+        detect_p99_ms = dq.p99,
+        "robot: L_SLAM's parts"
+    );
     let total: Vec<f64> = slam_ms.iter().map(|s| s + viz_p50).collect();
     let mut stdout = std::io::stdout().lock();
     if let Some(sc) = score {

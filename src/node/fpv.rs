@@ -239,18 +239,20 @@ pub async fn run(
             };
             match hub.publish(&view.frame, status) {
                 Ok(snapshot) => {
-                    // Foxglove's image panel gets the same PNG the browser does.
-                    if let (Some(fox), Some(stamp)) = (views.foxglove.as_ref(), Time::from_ns(t_ns)) {
+                    // Foxglove's image panel gets the same PNG the browser does, encoded only
+                    // while a panel is subscribed.
+                    let foxglove = views.foxglove.as_ref().filter(|f| f.subscribed(Topic::ArImage.name()));
+                    if let (Some(fox), Some(stamp), Ok(png)) = (foxglove, Time::from_ns(t_ns), snapshot.png()) {
                         let msg = CompressedImage {
                             header: Header { stamp, frame_id: "fpv_camera".into() },
                             format: "png".into(),
-                            data: snapshot.png.to_vec(),
+                            data: png.to_vec(),
                         };
                         let _ = fox.publish_msg(Topic::ArImage.name(), t_ns, &msg);
                     }
                     if let Some(r) = recorder.as_mut().filter(|_| summary.frames % cfg.record_frames_every.max(1) == 0)
                     {
-                        r.ar_frame(t_ns, &snapshot.png);
+                        r.ar_frame(t_ns, &view.frame);
                     }
                 }
                 Err(e) => tracing::warn!("frame not published: {e}"),

@@ -42,10 +42,11 @@ impl LidarFeed {
     pub fn take(&mut self, ev: LivoxEvent, recorder: Option<&mut NodeRecorder>) -> Option<Fed> {
         match ev {
             LivoxEvent::Scan { ip, scan } if *self.ours.get_or_insert(ip) == ip => {
+                let fed = Fed::Scan { scan: lio_scan(&scan), last_host_ns: scan.last_host_receive.map(|s| s.ns) };
                 if let Some(r) = recorder {
-                    r.scan(&scan);
+                    r.scan(scan);
                 }
-                Some(Fed::Scan { scan: lio_scan(&scan), last_host_ns: scan.last_host_receive.map(|s| s.ns) })
+                Some(fed)
             }
             LivoxEvent::Imu(r) if *self.ours.get_or_insert(r.ip) == r.ip => {
                 let s = imu_sample(&r);

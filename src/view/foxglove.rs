@@ -146,6 +146,12 @@ impl FoxgloveServer {
         self.shared.clients.lock().map(|c| c.len()).unwrap_or(0)
     }
 
+    /// Whether any client is subscribed to `topic` now (so a costly message need not be built).
+    pub fn subscribed(&self, topic: &str) -> bool {
+        let Some(channel) = self.shared.by_topic.get(topic) else { return false };
+        self.shared.clients.lock().map(|c| c.values().any(|s| s.subscriptions.contains_key(channel))).unwrap_or(false)
+    }
+
     /// Messages dropped for slow clients so far.
     pub fn dropped(&self) -> u64 {
         self.shared.dropped.load(Ordering::Relaxed)

@@ -95,8 +95,9 @@ async fn serve_connection(mut stream: TcpStream, hub: ViewHub, shutdown: Shutdow
     let head_only = request.method == Method::Head;
     let response = match request.path.as_str() {
         "/" | "/index.html" => ok_response("text/html; charset=utf-8", INDEX_HTML.as_bytes(), head_only),
-        "/frame.png" => match hub.latest() {
-            Some(s) => ok_response("image/png", &s.png, head_only),
+        "/frame.png" => match hub.latest().map(|s| s.png()) {
+            Some(Ok(png)) => ok_response("image/png", &png, head_only),
+            Some(Err(e)) => status_response(500, "Internal Server Error", &format!("{e}\n")),
             None => status_response(503, "Service Unavailable", "no frame yet\n"),
         },
         "/status.json" => {
@@ -196,10 +197,11 @@ async fn stream_frames(
     write_all(&mut stream, &head).await?;
     loop {
         let latest = frames.borrow_and_update().clone();
-        if let Some(s) = latest {
-            let mut part = format!("Content-Type: image/png\r\nContent-Length: {}\r\n\r\n", s.png.len()).into_bytes();
-            part.reserve(s.png.len() + BOUNDARY.len() + 8);
-            part.extend_from_slice(&s.png);
+        // A frame that cannot be encoded is skipped; the next one may be fine.
+        if let Some(png) = latest.and_then(|s| s.png().ok()) {
+            let mut part = format!("Content-Type: image/png\r\nContent-Length: {}\r\n\r\n", png.len()).into_bytes();
+            part.reserve(png.len() + BOUNDARY.len() + 8);
+            part.extend_from_slice(&png);
             part.extend_from_slice(format!("\r\n--{BOUNDARY}\r\n").as_bytes());
             write_all(&mut stream, &part).await?;
         }

@@ -1,16 +1,16 @@
 //! The latest AR frame, shared by every live view.
 //!
-//! The renderer calls [`ViewHub::publish`] once per frame; the frame is PNG-encoded there, once,
-//! and stored with its status in a `tokio::sync::watch` slot. Viewers read the newest snapshot
-//! when they are ready for one: a slow browser or display skips frames and never holds up the
-//! renderer (publishing is a slot swap, never a wait on a viewer).
+//! The renderer calls [`ViewHub::publish`] once per frame; the frame is stored with its status in
+//! a `tokio::sync::watch` slot. Viewers read the newest snapshot when they are ready for one: a
+//! slow browser or display skips frames and never holds up the renderer (publishing is a slot
+//! swap, never a wait on a viewer). The PNG is encoded once per frame by the first viewer that
+//! asks for it, so the renderer pays nothing for frames nobody watches.
 
 use super::error::ViewError;
 use serde::{Deserialize, Serialize};
 use starc_pipeline::ar::ArFrame;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
-use std::time::Instant;
+use std::sync::{Arc, OnceLock};
 use tokio::sync::watch;
 
 /// What the status line of every view shows, and `/status.json` serves.
@@ -30,15 +30,30 @@ pub struct ViewStatus {
     pub stamp_ns: u64,
 }
 
-/// One published frame: the raw image (for the framebuffer), its PNG (for the browser, PNG
-/// files and Foxglove) and its status.
+/// One published frame: the raw image (for the framebuffer), its PNG on demand (for the
+/// browser, PNG files and Foxglove) and its status.
 #[derive(Debug)]
 pub struct ViewSnapshot {
     pub frame: ArFrame,
-    pub png: Arc<[u8]>,
     pub status: ViewStatus,
-    /// How long the PNG encode took, in nanoseconds.
-    pub encode_ns: u64,
+    png: OnceLock<Arc<[u8]>>,
+}
+
+impl ViewSnapshot {
+    fn new(frame: ArFrame, status: ViewStatus) -> Self {
+        Self { frame, status, png: OnceLock::new() }
+    }
+
+    /// The frame as PNG, encoded by the first caller (the frame was checked at publish, so an
+    /// error here is the encoder's own).
+    pub fn png(&self) -> Result<Arc<[u8]>, ViewError> {
+        if let Some(png) = self.png.get() {
+            return Ok(png.clone());
+        }
+        let png: Arc<[u8]> = self.frame.to_png()?.into();
+        // Two viewers may race to encode the same frame; either result is the same bytes.
+        Ok(self.png.get_or_init(|| png).clone())
+    }
 }
 
 /// The slot viewers watch: `None` until the first frame.
@@ -63,14 +78,11 @@ impl ViewHub {
         Self { tx: Arc::new(tx), published: Arc::new(AtomicU64::new(0)) }
     }
 
-    /// Encodes `frame` as PNG and makes it (with `status`) the latest snapshot. A frame whose
-    /// buffer does not match its size is refused, so viewers can index it without checks failing.
+    /// Makes `frame` (with `status`) the latest snapshot. A frame whose buffer does not match
+    /// its size is refused, so viewers can index it without checks failing.
     pub fn publish(&self, frame: &ArFrame, status: ViewStatus) -> Result<Arc<ViewSnapshot>, ViewError> {
         check_frame(frame)?;
-        let t0 = Instant::now();
-        let png: Arc<[u8]> = frame.to_png()?.into();
-        let encode_ns = u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        let snapshot = Arc::new(ViewSnapshot { frame: frame.clone(), png, status, encode_ns });
+        let snapshot = Arc::new(ViewSnapshot::new(frame.clone(), status));
         // send_replace stores the value even while nobody watches: a viewer that connects
         // later still gets the latest frame.
         self.tx.send_replace(Some(snapshot.clone()));

@@ -36,7 +36,7 @@ impl PngDir {
         }
         let path = self.dir.join(format!("ar_{:08}.png", snapshot.status.frame_seq));
         let tmp = self.dir.join(format!(".ar_{:08}.png.tmp", snapshot.status.frame_seq));
-        std::fs::write(&tmp, &snapshot.png).map_err(|e| ViewError::io(format!("writing {}", tmp.display()), e))?;
+        std::fs::write(&tmp, snapshot.png()?).map_err(|e| ViewError::io(format!("writing {}", tmp.display()), e))?;
         std::fs::rename(&tmp, &path).map_err(|e| ViewError::io(format!("renaming to {}", path.display()), e))?;
         self.written += 1;
         Ok(Some(path))

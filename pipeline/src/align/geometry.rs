@@ -1,7 +1,7 @@
 //! Points, voxel keys, the voxel downsampler and the voxel-hash neighbour index.
 
 use crate::cloud::PointCloud;
-use crate::voxel_hash::VoxelHashMap;
+use crate::voxel_hash::{floor_i32, VoxelHashMap};
 use nalgebra::{Isometry3, Matrix3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 
 pub type Vec3 = Vector3<f64>;
@@ -11,7 +11,7 @@ pub type KeyMap<V> = VoxelHashMap<Key, V>;
 
 /// Voxel of a point; coordinates beyond ±2^31 cells saturate (harmless: such points match nothing).
 pub fn key_of(p: &Vec3, inv_cell_m: f64) -> Key {
-    ((p.x * inv_cell_m).floor() as i32, (p.y * inv_cell_m).floor() as i32, (p.z * inv_cell_m).floor() as i32)
+    (floor_i32(p.x * inv_cell_m), floor_i32(p.y * inv_cell_m), floor_i32(p.z * inv_cell_m))
 }
 
 /// The finite, non-zero points of a cloud in f64.
@@ -52,15 +52,48 @@ pub fn voxel_downsample_every(points: &[Vec3], voxel_m: f64, stride: usize) -> V
 /// Queries find every neighbour within `cell_m` of the query, and some farther ones.
 pub struct VoxelIndex {
     inv_cell_m: f64,
+    cell_m: f64,
     /// Indices into `points`, grouped by voxel; `cells` maps a voxel to its range here.
     order: Vec<u32>,
+    /// `points` in `order`: a cell's points side by side in memory (the nearest-neighbour scan
+    /// reads them in one run instead of jumping through `points`).
+    grouped: Vec<Vec3>,
     cells: KeyMap<(u32, u32)>,
     pub points: Vec<Vec3>,
 }
 
+/// The 26 neighbouring cells, faces first, then edges, then corners: the order in which their
+/// nearest possible point usually grows, so that the bound prunes the later ones.
+const NEIGHBOURS: [(i32, i32, i32); 26] = {
+    let mut out = [(0, 0, 0); 26];
+    let mut n = 0;
+    let mut moved = 1;
+    while moved <= 3 {
+        let mut dx = -1;
+        while dx <= 1 {
+            let mut dy = -1;
+            while dy <= 1 {
+                let mut dz = -1;
+                while dz <= 1 {
+                    if (dx != 0) as i32 + (dy != 0) as i32 + (dz != 0) as i32 == moved {
+                        out[n] = (dx, dy, dz);
+                        n += 1;
+                    }
+                    dz += 1;
+                }
+                dy += 1;
+            }
+            dx += 1;
+        }
+        moved += 1;
+    }
+    out
+};
+
 impl VoxelIndex {
     pub fn new(points: Vec<Vec3>, cell_m: f64) -> Self {
-        let inv_cell_m = 1.0 / cell_m.max(1e-6);
+        let cell_m = cell_m.max(1e-6);
+        let inv_cell_m = 1.0 / cell_m;
         let mut keyed: Vec<(Key, u32)> =
             points.iter().enumerate().map(|(i, p)| (key_of(p, inv_cell_m), i as u32)).collect();
         keyed.sort_unstable();
@@ -75,7 +108,21 @@ impl VoxelIndex {
             cells.insert(key, (start as u32, end as u32));
             start = end;
         }
-        Self { inv_cell_m, order: keyed.into_iter().map(|k| k.1).collect(), cells, points }
+        let order: Vec<u32> = keyed.into_iter().map(|k| k.1).collect();
+        let grouped = order.iter().filter_map(|&i| points.get(i as usize).copied()).collect();
+        Self { inv_cell_m, cell_m, order, grouped, cells, points }
+    }
+
+    /// Calls `f(index, squared distance)` for every point of one cell.
+    #[inline]
+    fn scan_cell(&self, key: Key, q: &Vec3, f: &mut impl FnMut(u32, f64)) {
+        let Some(&(a, b)) = self.cells.get(&key) else { return };
+        let (a, b) = (a as usize, b as usize);
+        if let (Some(points), Some(order)) = (self.grouped.get(a..b), self.order.get(a..b)) {
+            for (p, &i) in points.iter().zip(order) {
+                f(i, (p - q).norm_squared());
+            }
+        }
     }
 
     fn for_each_near(&self, q: &Vec3, mut f: impl FnMut(u32, f64)) {
@@ -83,27 +130,40 @@ impl VoxelIndex {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let key = (x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz));
-                    let Some(&(a, b)) = self.cells.get(&key) else { continue };
-                    for &i in self.order.get(a as usize..b as usize).unwrap_or(&[]) {
-                        if let Some(p) = self.points.get(i as usize) {
-                            f(i, (p - q).norm_squared());
-                        }
-                    }
+                    self.scan_cell((x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz)), q, &mut f);
                 }
             }
         }
     }
 
-    /// Nearest point within `max_m` (which should not exceed the cell size): (index, squared distance).
+    /// Nearest point within `max_m` (which should not exceed the cell size): (index, squared
+    /// distance). The query's own cell is searched first; a neighbouring cell only while the
+    /// nearest point it could hold is nearer than the best so far.
     pub fn nearest(&self, q: &Vec3, max_m: f64) -> Option<(usize, f64)> {
-        let mut best: Option<(usize, f64)> = None;
         let max2 = max_m * max_m;
-        self.for_each_near(q, |i, d2| {
-            if d2 <= max2 && best.is_none_or(|b| d2 < b.1) {
-                best = Some((i as usize, d2));
+        let mut best: Option<(usize, f64)> = None;
+        let (x, y, z) = key_of(q, self.inv_cell_m);
+        // Squared distance from the query to its cell's lower (-1) or upper (+1) face, per axis.
+        let face2 = |v: f64, k: i32, d: i32| {
+            let lo = (v - f64::from(k) * self.cell_m).clamp(0.0, self.cell_m);
+            match d {
+                -1 => lo * lo,
+                1 => (self.cell_m - lo) * (self.cell_m - lo),
+                _ => 0.0,
             }
-        });
+        };
+        for (dx, dy, dz) in std::iter::once((0, 0, 0)).chain(NEIGHBOURS) {
+            let lower2 = face2(q.x, x, dx) + face2(q.y, y, dy) + face2(q.z, z, dz);
+            if lower2 > best.map_or(max2, |b| b.1) {
+                continue;
+            }
+            let key = (x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz));
+            self.scan_cell(key, q, &mut |i, d2| {
+                if d2 <= max2 && best.is_none_or(|b| d2 < b.1) {
+                    best = Some((i as usize, d2));
+                }
+            });
+        }
         best
     }
 

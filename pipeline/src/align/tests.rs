@@ -80,6 +80,35 @@ fn a_source_capped_to_a_third_of_its_points_still_aligns() {
 }
 
 #[test]
+fn nearest_matches_a_brute_force_search() {
+    // A deterministic scatter over a few cells, queries inside and between them, on cell
+    // boundaries and outside the cloud, with the search radius at and under the cell size.
+    let mut state = 12345u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let points: Vec<Vec3> =
+        (0..2000).map(|_| Vec3::new(next() * 3.0 - 1.5, next() * 3.0 - 1.5, next() * 1.0)).collect();
+    let index = geometry::VoxelIndex::new(points.clone(), 0.5);
+    let mut queries: Vec<Vec3> =
+        (0..500).map(|_| Vec3::new(next() * 4.0 - 2.0, next() * 4.0 - 2.0, next() * 2.0 - 0.5)).collect();
+    queries.extend([Vec3::new(0.5, 0.5, 0.5), Vec3::new(-0.5, 0.0, 1.0), Vec3::new(10.0, 0.0, 0.0)]);
+    for max_m in [0.5, 0.2, 0.05] {
+        for q in &queries {
+            let brute = points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (i, (p - q).norm_squared()))
+                .filter(|&(_, d2)| d2 <= max_m * max_m)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let found = index.nearest(q, max_m);
+            assert_eq!(found.map(|f| f.1), brute.map(|b| b.1), "query {q:?}, radius {max_m}");
+        }
+    }
+}
+
+#[test]
 fn voxel_downsample_every_nth_point() {
     let points: Vec<Vec3> =
         (0..1000).map(|i| Vec3::new(f64::from(i % 10) * 0.01, f64::from(i / 10) * 0.01, 0.0)).collect();

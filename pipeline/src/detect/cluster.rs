@@ -2,7 +2,7 @@
 //! components, and plane peeling for clusters that hold a person and the wall, table or box
 //! they touch.
 
-use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
+use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 type KeyMap<V> = VoxelHashMap<[i32; 3], V>;
@@ -31,7 +31,7 @@ impl Grid {
         let mut sums: Vec<(Vector3<f64>, u32)> = Vec::new();
         let mut keys: Vec<[i32; 3]> = Vec::new();
         for (_, p) in points {
-            let key = [(p.x * inv).floor() as i32, (p.y * inv).floor() as i32, (p.z * inv).floor() as i32];
+            let key = [floor_i32(p.x * inv), floor_i32(p.y * inv), floor_i32(p.z * inv)];
             let next = keys.len() as u32;
             let v = *map.entry(key).or_insert(next);
             if v == next {

@@ -39,8 +39,9 @@ pub fn estimate_floor(points: &[WindowPoint], sensor_z: f64, cfg: &DetectConfig)
     let nbins = (40.0 / bin).ceil() as usize;
     let mut hist = vec![0u32; nbins];
     for p in points {
-        let i = ((f64::from(p.z_m) - lo) / bin).floor();
-        if i >= 0.0 && (i as usize) < nbins {
+        // Truncation is the floor here: below zero (and NaN) is out.
+        let i = (f64::from(p.z_m) - lo) / bin;
+        if i >= 0.0 {
             if let Some(h) = hist.get_mut(i as usize) {
                 *h += 1;
             }

@@ -2,7 +2,7 @@
 //! nearest neighbours come from the query's voxel and its 26 neighbours. Voxels far from the
 //! sensor are dropped, so the map stays local and its cost bounded.
 
-use crate::voxel_hash::VoxelHashMap;
+use crate::voxel_hash::{floor_i32, VoxelHashMap};
 use nalgebra::Vector3;
 
 type Key = (i32, i32, i32);
@@ -32,7 +32,7 @@ impl VoxelMap {
     }
 
     fn key(&self, p: &Vector3<f64>) -> Key {
-        let f = |v: f64| (v / self.resolution_m).floor() as i32;
+        let f = |v: f64| floor_i32(v / self.resolution_m);
         (f(p.x), f(p.y), f(p.z))
     }
 

@@ -8,7 +8,7 @@ use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::types::{ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
-use crate::voxel_hash::VoxelHashMap;
+use crate::voxel_hash::{floor_i32, VoxelHashMap};
 use nalgebra::{Isometry3, Rotation3, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -352,7 +352,7 @@ fn voxel_centroids<'a>(points: impl Iterator<Item = &'a Vector3<f64>>, voxel_m: 
     let mut cells: VoxelHashMap<(i32, i32, i32), (Vector3<f64>, u32)> = VoxelHashMap::default();
     cells.reserve(4096);
     for p in points {
-        let k = ((p.x / voxel_m).floor() as i32, (p.y / voxel_m).floor() as i32, (p.z / voxel_m).floor() as i32);
+        let k = (floor_i32(p.x / voxel_m), floor_i32(p.y / voxel_m), floor_i32(p.z / voxel_m));
         let e = cells.entry(k).or_insert((Vector3::zeros(), 0));
         e.0 += p;
         e.1 += 1;

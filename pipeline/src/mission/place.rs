@@ -35,7 +35,8 @@ impl ScanPoses {
     /// The pose for a point fired at `t_ns` (clamped to the scan).
     pub fn at(&self, t_ns: u64) -> Option<Isometry3<f64>> {
         let f = (t_ns.saturating_sub(self.start_ns) as f64 / self.span_ns).clamp(0.0, 1.0);
-        self.steps.get((f * POSE_STEPS as f64).round() as usize).copied().flatten()
+        // f is in [0, 1]: adding a half and truncating rounds it (without a libm call per point).
+        self.steps.get((f * POSE_STEPS as f64 + 0.5) as usize).copied().flatten()
     }
 }
 

@@ -7,7 +7,7 @@ use crate::align::encode_tiles;
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{DetectConfig, DetectWindow, Detection, Detector, GeometricDetector, WindowPoint};
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
-use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
+use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
 use starc_time::{Clock, Stamp};
@@ -144,7 +144,7 @@ impl RobotCore {
         for placed in std::mem::take(&mut self.unmapped) {
             for p in placed.iter() {
                 let v = p.xyz() / self.cfg.map_voxel_m;
-                let key = (v.x.floor() as i32, v.y.floor() as i32, v.z.floor() as i32);
+                let key = (floor_i32(v.x), floor_i32(v.y), floor_i32(v.z));
                 if self.voxels.insert(key) {
                     let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
                     self.tiles.entry(tile).or_default().push(p.xyz());
