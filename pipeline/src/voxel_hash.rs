@@ -67,12 +67,78 @@ pub fn floor_i32(v: f64) -> i32 {
     }
 }
 
+/// The 26 neighbours of a voxel, faces first, then edges, then corners: the order in which the
+/// nearest point they could hold usually grows, so that a nearest-neighbour search bounded by
+/// [`gap2`] skips the later ones.
+pub const NEIGHBOURS: [(i32, i32, i32); 26] = {
+    let mut out = [(0, 0, 0); 26];
+    let mut n = 0;
+    let mut moved = 1;
+    while moved <= 3 {
+        let mut dx = -1;
+        while dx <= 1 {
+            let mut dy = -1;
+            while dy <= 1 {
+                let mut dz = -1;
+                while dz <= 1 {
+                    if (dx != 0) as i32 + (dy != 0) as i32 + (dz != 0) as i32 == moved {
+                        out[n] = (dx, dy, dz);
+                        n += 1;
+                    }
+                    dz += 1;
+                }
+                dy += 1;
+            }
+            dx += 1;
+        }
+        moved += 1;
+    }
+    out
+};
+
+/// Squared distance from `q` (in voxel `key` of edge `cell_m`) to the nearest point of the voxel
+/// `offset` away (0 for its own): no point of that voxel is nearer.
+#[inline]
+pub fn gap2(q: [f64; 3], key: (i32, i32, i32), cell_m: f64, offset: (i32, i32, i32)) -> f64 {
+    let axis = |v: f64, k: i32, d: i32| {
+        // Into [0, cell]: the key may come from a division and the bound from a product.
+        let below = (v - f64::from(k) * cell_m).clamp(0.0, cell_m);
+        match d {
+            -1 => below * below,
+            1 => (cell_m - below) * (cell_m - below),
+            _ => 0.0,
+        }
+    };
+    axis(q[0], key.0, offset.0) + axis(q[1], key.1, offset.1) + axis(q[2], key.2, offset.2)
+}
+
 pub type VoxelHashMap<K, V> = HashMap<K, V, BuildHasherDefault<VoxelHasher>>;
 pub type VoxelHashSet<K> = HashSet<K, BuildHasherDefault<VoxelHasher>>;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn neighbours_are_each_offset_once_faces_first() {
+        let mut seen: Vec<_> = NEIGHBOURS.to_vec();
+        let moved = |d: &(i32, i32, i32)| (d.0 != 0) as i32 + (d.1 != 0) as i32 + (d.2 != 0) as i32;
+        assert!(NEIGHBOURS.windows(2).all(|w| moved(&w[0]) <= moved(&w[1])));
+        seen.sort_unstable();
+        seen.dedup();
+        assert_eq!(seen.len(), 26);
+        assert!(!seen.contains(&(0, 0, 0)));
+    }
+
+    #[test]
+    fn gap2_is_the_distance_to_the_neighbouring_voxel() {
+        // In voxel (0, 0, 0) of 1 m at (0.2, 0.7, 0.5): 0.2 m to x's lower face, 0.3 m to y's upper.
+        let q = [0.2, 0.7, 0.5];
+        assert_eq!(gap2(q, (0, 0, 0), 1.0, (0, 0, 0)), 0.0);
+        assert!((gap2(q, (0, 0, 0), 1.0, (-1, 0, 0)) - 0.04).abs() < 1e-12);
+        assert!((gap2(q, (0, 0, 0), 1.0, (-1, 1, 0)) - 0.13).abs() < 1e-12);
+        assert!((gap2(q, (0, 0, 0), 1.0, (1, 1, 1)) - (0.64 + 0.09 + 0.25)).abs() < 1e-12);
+    }
 
     #[test]
     fn floor_i32_is_floor_then_cast() {

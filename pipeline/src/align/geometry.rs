@@ -1,7 +1,7 @@
 //! Points, voxel keys, the voxel downsampler and the voxel-hash neighbour index.
 
 use crate::cloud::PointCloud;
-use crate::voxel_hash::{floor_i32, VoxelHashMap};
+use crate::voxel_hash::{floor_i32, gap2, VoxelHashMap, NEIGHBOURS};
 use nalgebra::{Isometry3, Matrix3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 
 pub type Vec3 = Vector3<f64>;
@@ -62,34 +62,6 @@ pub struct VoxelIndex {
     pub points: Vec<Vec3>,
 }
 
-/// The 26 neighbouring cells, faces first, then edges, then corners: the order in which their
-/// nearest possible point usually grows, so that the bound prunes the later ones.
-const NEIGHBOURS: [(i32, i32, i32); 26] = {
-    let mut out = [(0, 0, 0); 26];
-    let mut n = 0;
-    let mut moved = 1;
-    while moved <= 3 {
-        let mut dx = -1;
-        while dx <= 1 {
-            let mut dy = -1;
-            while dy <= 1 {
-                let mut dz = -1;
-                while dz <= 1 {
-                    if (dx != 0) as i32 + (dy != 0) as i32 + (dz != 0) as i32 == moved {
-                        out[n] = (dx, dy, dz);
-                        n += 1;
-                    }
-                    dz += 1;
-                }
-                dy += 1;
-            }
-            dx += 1;
-        }
-        moved += 1;
-    }
-    out
-};
-
 impl VoxelIndex {
     pub fn new(points: Vec<Vec3>, cell_m: f64) -> Self {
         let cell_m = cell_m.max(1e-6);
@@ -142,23 +114,13 @@ impl VoxelIndex {
     pub fn nearest(&self, q: &Vec3, max_m: f64) -> Option<(usize, f64)> {
         let max2 = max_m * max_m;
         let mut best: Option<(usize, f64)> = None;
-        let (x, y, z) = key_of(q, self.inv_cell_m);
-        // Squared distance from the query to its cell's lower (-1) or upper (+1) face, per axis.
-        let face2 = |v: f64, k: i32, d: i32| {
-            let lo = (v - f64::from(k) * self.cell_m).clamp(0.0, self.cell_m);
-            match d {
-                -1 => lo * lo,
-                1 => (self.cell_m - lo) * (self.cell_m - lo),
-                _ => 0.0,
-            }
-        };
-        for (dx, dy, dz) in std::iter::once((0, 0, 0)).chain(NEIGHBOURS) {
-            let lower2 = face2(q.x, x, dx) + face2(q.y, y, dy) + face2(q.z, z, dz);
-            if lower2 > best.map_or(max2, |b| b.1) {
+        let key = key_of(q, self.inv_cell_m);
+        for d in std::iter::once((0, 0, 0)).chain(NEIGHBOURS) {
+            if gap2([q.x, q.y, q.z], key, self.cell_m, d) > best.map_or(max2, |b| b.1) {
                 continue;
             }
-            let key = (x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz));
-            self.scan_cell(key, q, &mut |i, d2| {
+            let cell = (key.0.saturating_add(d.0), key.1.saturating_add(d.1), key.2.saturating_add(d.2));
+            self.scan_cell(cell, q, &mut |i, d2| {
                 if d2 <= max2 && best.is_none_or(|b| d2 < b.1) {
                     best = Some((i as usize, d2));
                 }

@@ -17,6 +17,8 @@ pub struct Voxel {
 /// The occupied voxels and, for each, its points (indices into the window).
 pub struct Grid {
     pub voxels: Vec<Voxel>,
+    /// Voxel key to its index in `voxels`.
+    index: KeyMap<u32>,
     /// Points of voxel v: `members[offsets[v]..offsets[v + 1]]`.
     offsets: Vec<u32>,
     members: Vec<u32>,
@@ -69,7 +71,12 @@ impl Grid {
             .zip(sums)
             .map(|(key, (sum, n))| Voxel { key, centre: sum / f64::from(n.max(1)) })
             .collect();
-        Self { voxels, offsets, members }
+        Self { voxels, index: map, offsets, members }
+    }
+
+    /// Every voxel, as the subset [`Self::components`] takes.
+    pub fn all(&self) -> Vec<u32> {
+        (0..self.voxels.len() as u32).collect()
     }
 
     /// The window indices of the points in voxel `v`.
@@ -88,13 +95,18 @@ impl Grid {
 
     /// 26-connected components of a set of voxels (indices into `voxels`).
     pub fn components(&self, subset: &[u32]) -> Vec<Vec<u32>> {
-        let mut local: KeyMap<u32> = KeyMap::default();
-        local.reserve(subset.len());
-        for (i, &v) in subset.iter().enumerate() {
-            if let Some(vox) = self.voxels.get(v as usize) {
-                local.insert(vox.key, i as u32);
+        // The whole grid (every window's first call) is indexed already: position i is voxel i.
+        let whole = subset.len() == self.voxels.len() && subset.iter().enumerate().all(|(i, &v)| i as u32 == v);
+        let mut built: KeyMap<u32> = KeyMap::default();
+        if !whole {
+            built.reserve(subset.len());
+            for (i, &v) in subset.iter().enumerate() {
+                if let Some(vox) = self.voxels.get(v as usize) {
+                    built.insert(vox.key, i as u32);
+                }
             }
         }
+        let local = if whole { &self.index } else { &built };
         let mut parent: Vec<u32> = (0..subset.len() as u32).collect();
         for (i, &v) in subset.iter().enumerate() {
             let Some(vox) = self.voxels.get(v as usize) else { continue };

@@ -118,7 +118,7 @@ impl Detector for GeometricDetector {
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
-        let all: Vec<u32> = (0..grid.voxels.len() as u32).collect();
+        let all = grid.all();
         let points = window.points;
         let lookup = |i: u32| {
             points.get(i as usize).map(|p| {
