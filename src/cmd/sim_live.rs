@@ -26,6 +26,9 @@ use tokio::sync::{mpsc, watch};
 /// The mocks' addresses on loopback (the nodes find them by their broadcasts).
 const ROBOT_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 1);
 const FPV_MOCK: Ipv4Addr = Ipv4Addr::new(127, 0, 7, 2);
+/// Nice value of the harness (the mock devices and the scorer): on this one machine they share
+/// the cores with both nodes, which in the field each have their own computer and real devices.
+const HARNESS_NICE: i32 = 5;
 /// Time after the recording's end for the nodes to finish their last scans.
 const TAIL: Duration = Duration::from_millis(1500);
 /// How long the rig keeps listening after the robot has stopped (the link takes well under 1 ms
@@ -139,7 +142,12 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let schedule: Vec<(u64, u64)> = score.truth.frames.iter().map(|f| (f.index, f.t_ns)).collect();
 
     // The mocks, on their own runtime: playback starts PLAYBACK_LEAD_NS after now, at the first stamp.
-    let mocks_rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    // They stand in for devices that cost a real host no CPU: below the nodes when the cores are busy.
+    let mocks_rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .on_thread_start(|| crate::node::lower_this_thread(HARNESS_NICE))
+        .enable_all()
+        .build()?;
     let w0 = Instant::now() + Duration::from_nanos(super::mock::PLAYBACK_LEAD_NS);
     let mut mocks = Vec::new();
     for (sim_ip, mock_ip, bcast) in [(ROBOT_AVIA, ROBOT_MOCK, robot_bcast), (FPV_AVIA, FPV_MOCK, fpv_bcast)] {
@@ -162,6 +170,8 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (fpv_tx, mut fpv_rx) = mpsc::unbounded_channel();
     let robot = spawn_node("robot-node", move || robot::run(robot_cfg, robot_stop, Some(robot_tx)))?;
     let fpv = spawn_node("fpv-node", move || fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx)))?;
+    // The scoring below is the harness too (the nodes' threads, started above, keep their priority).
+    crate::node::lower_this_thread(HARNESS_NICE);
 
     let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
     let total_s = deadline.saturating_duration_since(Instant::now()).as_secs_f64();

@@ -15,7 +15,7 @@ pub fn spawn_low_priority<T: Send + 'static>(
 ) -> oneshot::Receiver<T> {
     let (tx, rx) = oneshot::channel();
     let spawned = std::thread::Builder::new().name(name.into()).spawn(move || {
-        lower_this_thread();
+        lower_this_thread(NICE_STEPS);
         let _ = tx.send(work());
     });
     if let Err(e) = spawned {
@@ -24,15 +24,17 @@ pub fn spawn_low_priority<T: Send + 'static>(
     rx
 }
 
-fn lower_this_thread() {
+/// Sets the calling thread's nice value (0-19; higher runs later when the cores are busy).
+/// Threads it starts afterwards inherit it. Failing to is logged, not an error: the work still runs.
+pub fn lower_this_thread(nice: i32) {
     // SAFETY: gettid and setpriority take and return plain integers and touch no memory of ours.
     // On Linux the nice value belongs to the thread (the id gettid returns), not the process.
     let rc = unsafe {
         let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        libc::setpriority(libc::PRIO_PROCESS, tid, NICE_STEPS)
+        libc::setpriority(libc::PRIO_PROCESS, tid, nice)
     };
     if rc != 0 {
-        tracing::debug!("could not lower the background thread's priority: {}", std::io::Error::last_os_error());
+        tracing::debug!("could not lower the thread's priority: {}", std::io::Error::last_os_error());
     }
 }
 

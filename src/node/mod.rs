@@ -3,6 +3,7 @@
 //! (`starc_pipeline::mission`) and its outputs; `starc sim` runs both against mock devices.
 
 mod background;
+pub use background::lower_this_thread;
 pub mod config;
 pub mod fpv;
 pub mod recording;

@@ -20,7 +20,8 @@ pub struct ClusterFeatures {
     pub top_m: f64,
     /// Share of the points within the face tolerance of a side of the box, turned to the heading
     /// (3 deg steps) that puts the most points there (not the top: the field of view cuts people
-    /// seen up close flat at the top).
+    /// seen up close flat at the top). NaN when not measured: no face share could have made the
+    /// cluster a person (see [`features`]).
     pub face_share: f64,
     /// Share of the points within the face tolerance of the top alone (a box's flat top).
     pub top_share: f64,
@@ -90,13 +91,16 @@ fn on_faces(points: &[Vector3<f64>], yaw: f64, tolerance_m: f64) -> usize {
         .count()
 }
 
-/// `points` maps a window index to (x, y, height above floor).
+/// `points` maps a window index to (x, y, height above floor). The face share, the costliest
+/// feature (a heading search), is measured only where `worth_faces` says so of the features
+/// with a face share of 0 (the best a scorer can see): elsewhere it is left NaN.
 pub fn features(
     grid: &Grid,
     cluster: &[u32],
     points: &dyn Fn(u32) -> Option<Vector3<f64>>,
     sensor_xy: [f64; 2],
     face_tolerance_m: f64,
+    worth_faces: &dyn Fn(&ClusterFeatures) -> bool,
 ) -> Option<ClusterFeatures> {
     let centres: Vec<Vector3<f64>> =
         cluster.iter().filter_map(|&v| grid.voxels.get(v as usize)).map(|v| v.centre).collect();
@@ -174,15 +178,7 @@ pub fn features(
     // edge frame alone is not enough: seen through the LIO's poses, a wall end's L flickered
     // between 0.35 and 0.9 from one window to the next (the tactical house's front door).
     let sample: Vec<Vector3<f64>> = raw.iter().step_by((raw.len() / 600).max(1)).copied().collect();
-    // The heading is searched on half the sample (the search on the whole of it cost a third of
-    // the detector's time), the share measured on all of it.
-    let search: Vec<Vector3<f64>> = raw.iter().step_by((raw.len() / 300).max(1)).copied().collect();
-    let steps = (90.0 / FACE_YAW_STEP_DEG).round() as i32;
-    let face_yaw = (0..steps)
-        .map(|k| edge_yaw + (f64::from(k) * FACE_YAW_STEP_DEG).to_radians())
-        .max_by_key(|&yaw| on_faces(&search, yaw, face_tolerance_m))
-        .unwrap_or(edge_yaw);
-    let (on, seen) = (on_faces(&sample, face_yaw, face_tolerance_m), sample.len());
+    let seen = sample.len();
     let (_, z1) = quantiles(sample.iter().map(|p| p.z).collect());
     let on_top = sample.iter().filter(|p| (z1 - p.z).abs() < face_tolerance_m).count();
     // Thickness from the raw points (the voxel centres are smoothed).
@@ -210,7 +206,7 @@ pub fn features(
         (ev.first().copied().unwrap_or(0.0), ev.get(1).copied().unwrap_or(0.0), ev.get(2).copied().unwrap_or(0.0));
     let (linearity, planarity) = if l1 > 0.0 { ((l1 - l2) / l1, (l2 - l3) / l1) } else { (0.0, 0.0) };
 
-    Some(ClusterFeatures {
+    let mut f = ClusterFeatures {
         points: raw.len(),
         voxels: centres.len(),
         centre,
@@ -218,13 +214,29 @@ pub fn features(
         yaw_rad: wrap(yaw),
         bottom_m: lo.z,
         top_m: hi.z,
-        face_share: on as f64 / seen.max(1) as f64,
+        face_share: 0.0,
         top_share: on_top as f64 / seen.max(1) as f64,
         linearity,
         planarity,
         thickness_m,
         range_m: (centre.x - sensor_xy[0]).hypot(centre.y - sensor_xy[1]),
-    })
+    };
+    f.face_share = if worth_faces(&f) { face_share(&raw, &sample, edge_yaw, face_tolerance_m) } else { f64::NAN };
+    Some(f)
+}
+
+/// The share of `sample` on the faces of its box at the heading, in 3 deg steps from
+/// `edge_yaw`, that puts the most of `raw` there.
+fn face_share(raw: &[Vector3<f64>], sample: &[Vector3<f64>], edge_yaw: f64, tolerance_m: f64) -> f64 {
+    // The heading is searched on half the sample (the search on the whole of it cost a third of
+    // the detector's time), the share measured on all of it.
+    let search: Vec<Vector3<f64>> = raw.iter().step_by((raw.len() / 300).max(1)).copied().collect();
+    let steps = (90.0 / FACE_YAW_STEP_DEG).round() as i32;
+    let face_yaw = (0..steps)
+        .map(|k| edge_yaw + (f64::from(k) * FACE_YAW_STEP_DEG).to_radians())
+        .max_by_key(|&yaw| on_faces(&search, yaw, tolerance_m))
+        .unwrap_or(edge_yaw);
+    on_faces(sample, face_yaw, tolerance_m) as f64 / sample.len().max(1) as f64
 }
 
 /// Heading in (-pi/2, pi/2]: a box is the same turned by half a turn.

@@ -147,13 +147,27 @@ impl Detector for GeometricDetector {
                 }
                 continue;
             }
-            let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m) else {
+            // The face share only where it can decide: the scores fall as it grows, so one
+            // that fails with a share of 0 (and is no structure a followed person could be)
+            // fails with any.
+            let worth_faces = |f: &ClusterFeatures| {
+                let xy = Vector2::new(f.centre.x, f.centre.y);
+                let structure = f.top_m > top - CEILING_CONTACT_M;
+                self.keep_cluster_points
+                    || (!structure
+                        && (score(f, cfg).1 >= cfg.min_score
+                            || (follow_ns > 0 && score_followed(f, cfg).1 >= cfg.min_score && near_followed(xy))))
+            };
+            let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m, &worth_faces)
+            else {
                 continue;
             };
+            // Not measured: no face share could have passed it (`score` would take NaN as 0).
+            let unmeasured = f.face_share.is_nan();
             let (mut pose, mut s) = score(&f, cfg);
             // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
             let structure = f.top_m > top - CEILING_CONTACT_M;
-            if structure {
+            if structure || unmeasured {
                 s = 0.0;
             }
             if self.keep_cluster_points {
@@ -187,7 +201,7 @@ impl Detector for GeometricDetector {
             );
             if s >= cfg.min_score {
                 confirmed_now.push((xy, now_ns));
-            } else if !structure && follow_ns > 0 && near_followed(xy) {
+            } else if !structure && !unmeasured && follow_ns > 0 && near_followed(xy) {
                 // Someone every gate saw here moments ago: judged as a partial view of them.
                 (pose, s) = score_followed(&f, cfg);
             }

@@ -356,3 +356,22 @@ fn a_followed_lying_person_may_be_shorter_than_a_lying_person_alone() {
     let short = ClusterFeatures { size: Vector3::new(0.3, 0.3, 0.18), ..f };
     assert!(score_followed(&short, &cfg).1 < cfg.min_score, "a 0.3 m stub is no one");
 }
+
+#[test]
+fn the_face_share_is_measured_only_where_it_can_decide() {
+    // The scene's people have theirs measured; the cardboard box (no posture fits a 0.5 m cube
+    // 0.6 m high whatever its faces) is left unmeasured, and the tuning mode measures every one.
+    let points = scene();
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    det.detect(&window(&points), &mut found);
+    let near = |f: &ClusterFeatures, x: f64, y: f64| (f.centre.x - x).hypot(f.centre.y - y) < 0.4;
+    let clusters = det.last_clusters().to_vec();
+    let person = clusters.iter().find(|(f, _)| near(f, 4.0, 1.0)).expect("the standing person is scored");
+    assert!(person.0.face_share.is_finite(), "{person:?}");
+    let the_box = clusters.iter().find(|(f, _)| near(f, 3.0, -1.8)).expect("the box is scored");
+    assert!(the_box.0.face_share.is_nan() && the_box.1 == 0.0, "{the_box:?}");
+    det.keep_cluster_points(true);
+    det.detect(&window(&points), &mut Vec::new());
+    assert!(det.last_clusters().iter().all(|(f, _)| f.face_share.is_finite()), "{:#?}", det.last_clusters());
+}
