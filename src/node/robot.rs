@@ -8,10 +8,15 @@ use super::{wait_stop, Fed, LidarFeed, Stop};
 use anyhow::Context;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, Role};
 use starc_livox::live::LivoxDriver;
-use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
+use starc_pipeline::detect::WindowPoint;
+use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep};
 use std::collections::VecDeque;
-use std::time::Duration;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
+
+/// How much lower than the node the map thread runs (nice steps): the map can wait a scan.
+const MAP_NICE: i32 = 5;
 
 /// What the robot node did, for a caller that watches it (the simulated mission).
 #[derive(Debug)]
@@ -36,22 +41,31 @@ pub async fn run(
     watch: Option<mpsc::UnboundedSender<RobotEvent>>,
 ) -> anyhow::Result<RobotSummary> {
     let core_cfg = RobotCoreConfig { lio: lio_config(cfg.lio.as_deref())?, ..RobotCoreConfig::default() };
+    let map = RobotMap::new(core_cfg.map_config())?;
     let mut core = RobotCore::new(core_cfg)?;
+    let period = Duration::from_millis(cfg.map_period_ms.max(10));
+    let (map_tx, mut tiles_rx, map_thread) = spawn_map(map, period)?;
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "robot")).transpose()?;
     let link = LinkNode::open(&cfg.link, Role::Robot).await.context("opening the link")?;
     let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
     tracing::info!(host = ?driver.host, "robot node up");
     let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
-    let mut map_tick = tokio::time::interval(Duration::from_millis(cfg.map_period_ms.max(10)));
     let mut scan_hosts: VecDeque<(u64, u64)> = VecDeque::new();
     let mut steps: Vec<RobotStep> = Vec::new();
     let mut summary = RobotSummary::default();
     let mut seq = 0u32;
+    let mut map_alive = true;
     loop {
         tokio::select! {
             _ = wait_stop(&mut stop) => break,
-            _ = map_tick.tick() => {
-                for bytes in core.take_changed_tiles()? {
+            tiles = tiles_rx.recv(), if map_alive => {
+                let Some(tiles) = tiles else {
+                    // It failed (its error comes from the join below); the node goes on without a map.
+                    tracing::warn!("the map thread stopped: no more map tiles");
+                    map_alive = false;
+                    continue;
+                };
+                for bytes in tiles {
                     link.publish(&LinkMessage::MapTile { bytes }).await?;
                     summary.tiles_sent += 1;
                 }
@@ -72,6 +86,9 @@ pub async fn run(
                         core.push_imu(s, &mut steps);
                     }
                     None => {}
+                }
+                for placed in core.take_unmapped() {
+                    let _ = map_tx.send(placed);
                 }
                 for step in steps.drain(..) {
                     // The detection leaves first: it is what the latency is measured on.
@@ -113,11 +130,19 @@ pub async fn run(
             }
         }
     }
-    // The last tiles, so a rig that joins after the run still gets the whole map.
-    for bytes in core.take_changed_tiles()? {
-        link.publish(&LinkMessage::MapTile { bytes }).await?;
-        summary.tiles_sent += 1;
+    // The last tiles, so a rig that joins after the run still gets the whole map: the map
+    // thread sends them once it has everything.
+    for placed in core.take_unmapped() {
+        let _ = map_tx.send(placed);
     }
+    drop(map_tx);
+    while let Some(tiles) = tiles_rx.recv().await {
+        for bytes in tiles {
+            link.publish(&LinkMessage::MapTile { bytes }).await?;
+            summary.tiles_sent += 1;
+        }
+    }
+    map_thread.join().map_err(|_| anyhow::anyhow!("the map thread panicked"))??;
     if let Some(r) = recorder.take() {
         r.finish()?;
     }
@@ -126,4 +151,35 @@ pub async fn run(
     summary.peak_rss_mib = crate::cmd::lio::peak_rss_mib();
     tracing::info!(?summary, "robot node down");
     Ok(summary)
+}
+
+type MapThread = std::thread::JoinHandle<anyhow::Result<()>>;
+type PlacedScans = std::sync::mpsc::Sender<Arc<Vec<WindowPoint>>>;
+type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
+
+/// The map grown on its own thread, below the node's priority, from the placed scans the node
+/// hands it: growing it and encoding tiles (several milliseconds a second) never hold up a scan
+/// or a detection. Every `period` it sends the changed tiles, and the last ones once the node
+/// hangs up.
+fn spawn_map(mut map: RobotMap, period: Duration) -> anyhow::Result<(PlacedScans, EncodedTiles, MapThread)> {
+    let (scans_tx, scans_rx) = std::sync::mpsc::channel::<Arc<Vec<WindowPoint>>>();
+    let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
+    let thread = std::thread::Builder::new().name("robot-map".into()).spawn(move || {
+        super::lower_this_thread(MAP_NICE);
+        let mut next = Instant::now() + period;
+        loop {
+            match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
+                Ok(placed) => map.add(&placed),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+            if Instant::now() >= next {
+                next = (next + period).max(Instant::now());
+                let _ = tiles_tx.send(map.take_changed_tiles()?);
+            }
+        }
+        let _ = tiles_tx.send(map.take_changed_tiles()?);
+        Ok(())
+    })?;
+    Ok((scans_tx, tiles_rx, thread))
 }

@@ -10,11 +10,13 @@ mod overlay;
 mod place;
 mod rig;
 mod robot;
+mod robot_map;
 
 pub use overlay::Overlay;
 pub use place::ScanPlacer;
 pub use rig::{AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig};
 pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
+pub use robot_map::{RobotMap, RobotMapConfig};
 
 use crate::ar::{self, ArFrame, ArPerson, ArStatus, CameraModel, RenderConfig};
 use nalgebra::{Isometry3, Vector3};

@@ -3,11 +3,10 @@
 //! aligns to (kept as one point per voxel, handed out as changed map tiles) out.
 
 use super::place::ScanPlacer;
-use crate::align::encode_tiles;
+use super::robot_map::{RobotMap, RobotMapConfig};
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{DetectConfig, DetectWindow, Detection, Detector, GeometricDetector, WindowPoint};
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
-use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
 use starc_time::{Clock, Stamp};
@@ -33,6 +32,13 @@ pub struct RobotCoreConfig {
     /// Only a person's points this close (in the floor plane) to the median of their points are
     /// drawn: what the cluster took from a chair or a wall beside them is not (0: all).
     pub person_radius_m: f64,
+}
+
+impl RobotCoreConfig {
+    /// The map's part of the config.
+    pub fn map_config(&self) -> RobotMapConfig {
+        RobotMapConfig { voxel_m: self.map_voxel_m, tile_edge_m: self.tile_edge_m, tile_step_m: self.tile_step_m }
+    }
 }
 
 impl Default for RobotCoreConfig {
@@ -71,8 +77,6 @@ pub struct RobotStep {
     pub detection: Option<RobotDetection>,
 }
 
-type VoxelKey = (i32, i32, i32);
-
 pub struct RobotCore {
     cfg: RobotCoreConfig,
     lio: Lio,
@@ -80,22 +84,19 @@ pub struct RobotCore {
     detector: GeometricDetector,
     window: VecDeque<Arc<Vec<WindowPoint>>>,
     /// Placed scans not yet in the map (shared with the window): they go in when the map is
-    /// next asked for, so that growing the map never delays a detection.
+    /// next asked for, so that growing the map never delays a detection (or a node takes them
+    /// to grow its own map elsewhere: [`Self::take_unmapped`]).
     unmapped: Vec<Arc<Vec<WindowPoint>>>,
-    /// Occupied voxels of the map, and each tile's points (one per voxel).
-    voxels: VoxelHashSet<VoxelKey>,
-    tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
-    dirty_tiles: VoxelHashSet<VoxelKey>,
-    tile_version: u32,
+    map: RobotMap,
     outs: Vec<ScanOutput>,
 }
 
 impl RobotCore {
     pub fn new(cfg: RobotCoreConfig) -> Result<Self, PipelineError> {
-        if !(cfg.map_voxel_m > 0.0 && cfg.tile_edge_m > cfg.map_voxel_m && cfg.detect_scans > 0) {
+        if cfg.detect_scans == 0 {
             return Err(PipelineError::BadFile {
                 format: "robot config",
-                reason: "map_voxel_m, tile_edge_m and detect_scans must be positive, tiles larger than voxels".into(),
+                reason: "detect_scans must be positive".into(),
             });
         }
         Ok(Self {
@@ -104,10 +105,7 @@ impl RobotCore {
             placer: ScanPlacer::default(),
             window: VecDeque::new(),
             unmapped: Vec::new(),
-            voxels: VoxelHashSet::default(),
-            tiles: VoxelHashMap::default(),
-            dirty_tiles: VoxelHashSet::default(),
-            tile_version: 0,
+            map: RobotMap::new(cfg.map_config())?,
             outs: Vec::new(),
             cfg,
         })
@@ -140,22 +138,16 @@ impl RobotCore {
     }
 
     fn flush_map(&mut self) {
-        let per_tile = self.voxels_per_tile();
         for placed in std::mem::take(&mut self.unmapped) {
-            for p in placed.iter() {
-                let v = p.xyz() / self.cfg.map_voxel_m;
-                let key = (floor_i32(v.x), floor_i32(v.y), floor_i32(v.z));
-                if self.voxels.insert(key) {
-                    let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
-                    self.tiles.entry(tile).or_default().push(p.xyz());
-                    self.dirty_tiles.insert(tile);
-                }
-            }
+            self.map.add(&placed);
         }
     }
 
-    fn voxels_per_tile(&self) -> i32 {
-        (self.cfg.tile_edge_m / self.cfg.map_voxel_m).round().max(1.0) as i32
+    /// The placed scans not yet in this core's map, for a map grown elsewhere (a
+    /// [`RobotMap`] made from [`RobotCoreConfig::map_config`]); this core's own map then never
+    /// sees them.
+    pub fn take_unmapped(&mut self) -> Vec<Arc<Vec<WindowPoint>>> {
+        std::mem::take(&mut self.unmapped)
     }
 
     fn detect(&mut self, o: &ScanOutput) -> RobotDetection {
@@ -188,29 +180,18 @@ impl RobotCore {
     /// The whole map for alignment (one point per voxel), in the robot's world.
     pub fn map_points(&mut self) -> Vec<Vector3<f64>> {
         self.flush_map();
-        self.tiles.values().flatten().copied().collect()
+        self.map.points()
     }
 
     pub fn map_len(&mut self) -> usize {
         self.flush_map();
-        self.voxels.len()
+        self.map.len()
     }
 
-    /// The map tiles changed since the last call, encoded (see [`crate::align::tiles`]); every
-    /// call that sends anything bumps the version, so a rig keeps the newest of each tile.
+    /// The map tiles changed since the last call, encoded (see [`RobotMap::take_changed_tiles`]).
     pub fn take_changed_tiles(&mut self) -> Result<Vec<Vec<u8>>, PipelineError> {
         self.flush_map();
-        if self.dirty_tiles.is_empty() {
-            return Ok(Vec::new());
-        }
-        let per_tile = self.voxels_per_tile();
-        let dirty = std::mem::take(&mut self.dirty_tiles);
-        let points: Vec<Vector3<f64>> = dirty.iter().filter_map(|t| self.tiles.get(t)).flatten().copied().collect();
-        self.tile_version = self.tile_version.wrapping_add(1);
-        let edge_m = f64::from(per_tile) * self.cfg.map_voxel_m;
-        let normals = vec![None; points.len()];
-        let tiles = encode_tiles(&points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version)?;
-        Ok(tiles.into_iter().map(|(_, bytes)| bytes).collect())
+        self.map.take_changed_tiles()
     }
 }
 

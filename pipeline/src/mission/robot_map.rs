@@ -1,0 +1,137 @@
+//! The robot's map for the rig's alignment, sans-IO: placed scans in, one point per voxel kept,
+//! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
+//! from [`super::RobotCore`] so that a node can grow it off the live path.
+
+use crate::align::encode_tiles;
+use crate::detect::WindowPoint;
+use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
+use crate::PipelineError;
+use nalgebra::Vector3;
+
+type VoxelKey = (i32, i32, i32);
+
+/// Voxel and tile sizes of a [`RobotMap`].
+#[derive(Clone, Copy, Debug)]
+pub struct RobotMapConfig {
+    /// One point per voxel of this size.
+    pub voxel_m: f64,
+    /// Edge and quantization of the tiles.
+    pub tile_edge_m: f64,
+    pub tile_step_m: f64,
+}
+
+pub struct RobotMap {
+    cfg: RobotMapConfig,
+    /// Occupied voxels, and each tile's points (one per voxel).
+    voxels: VoxelHashSet<VoxelKey>,
+    tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
+    dirty_tiles: VoxelHashSet<VoxelKey>,
+    tile_version: u32,
+}
+
+impl RobotMap {
+    pub fn new(cfg: RobotMapConfig) -> Result<Self, PipelineError> {
+        if !(cfg.voxel_m > 0.0 && cfg.tile_edge_m > cfg.voxel_m) {
+            return Err(PipelineError::BadFile {
+                format: "robot config",
+                reason: "map_voxel_m and tile_edge_m must be positive, tiles larger than voxels".into(),
+            });
+        }
+        Ok(Self {
+            cfg,
+            voxels: VoxelHashSet::default(),
+            tiles: VoxelHashMap::default(),
+            dirty_tiles: VoxelHashSet::default(),
+            tile_version: 0,
+        })
+    }
+
+    /// Adds a placed scan's points (world frame): the first point of each new voxel is kept.
+    pub fn add(&mut self, points: &[WindowPoint]) {
+        let per_tile = self.voxels_per_tile();
+        for p in points {
+            let v = p.xyz() / self.cfg.voxel_m;
+            let key = (floor_i32(v.x), floor_i32(v.y), floor_i32(v.z));
+            if self.voxels.insert(key) {
+                let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
+                self.tiles.entry(tile).or_default().push(p.xyz());
+                self.dirty_tiles.insert(tile);
+            }
+        }
+    }
+
+    fn voxels_per_tile(&self) -> i32 {
+        (self.cfg.tile_edge_m / self.cfg.voxel_m).round().max(1.0) as i32
+    }
+
+    /// The whole map (one point per voxel), in the robot's world.
+    pub fn points(&self) -> Vec<Vector3<f64>> {
+        self.tiles.values().flatten().copied().collect()
+    }
+
+    /// Occupied voxels.
+    pub fn len(&self) -> usize {
+        self.voxels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.voxels.is_empty()
+    }
+
+    /// The tiles changed since the last call, encoded; every call that sends anything bumps the
+    /// version, so a rig keeps the newest of each tile.
+    pub fn take_changed_tiles(&mut self) -> Result<Vec<Vec<u8>>, PipelineError> {
+        if self.dirty_tiles.is_empty() {
+            return Ok(Vec::new());
+        }
+        let per_tile = self.voxels_per_tile();
+        let dirty = std::mem::take(&mut self.dirty_tiles);
+        let points: Vec<Vector3<f64>> = dirty.iter().filter_map(|t| self.tiles.get(t)).flatten().copied().collect();
+        self.tile_version = self.tile_version.wrapping_add(1);
+        let edge_m = f64::from(per_tile) * self.cfg.voxel_m;
+        let normals = vec![None; points.len()];
+        let tiles = encode_tiles(&points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version)?;
+        Ok(tiles.into_iter().map(|(_, bytes)| bytes).collect())
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::align::TileMap;
+
+    fn points(xs: impl Iterator<Item = f64>) -> Vec<WindowPoint> {
+        xs.map(|x| WindowPoint { x_m: x as f32, y_m: 0.5, z_m: 1.0, t_ns: 0 }).collect()
+    }
+
+    #[test]
+    fn keeps_a_point_per_voxel_and_sends_each_change_once() {
+        let cfg = RobotMapConfig { voxel_m: 0.1, tile_edge_m: 4.0, tile_step_m: 0.01 };
+        let mut map = RobotMap::new(cfg).unwrap();
+        // 0.01 m apart over 2 m: 20 voxels of 0.1 m, one tile of 4 m.
+        map.add(&points((0..200).map(|i| f64::from(i) * 0.01 + 0.005)));
+        assert_eq!(map.len(), 20);
+        let first = map.take_changed_tiles().unwrap();
+        assert_eq!(first.len(), 1);
+        assert!(map.take_changed_tiles().unwrap().is_empty(), "nothing changed since");
+        // The same voxels again change nothing; a point 10 m away makes one new tile.
+        map.add(&points((0..200).map(|i| f64::from(i) * 0.01 + 0.005)));
+        assert!(map.take_changed_tiles().unwrap().is_empty());
+        map.add(&points([10.05].into_iter()));
+        let second = map.take_changed_tiles().unwrap();
+        assert_eq!(second.len(), 1);
+        // A rig applying every tile holds the whole map.
+        let mut rig = TileMap::default();
+        for t in first.iter().chain(&second) {
+            rig.apply(t).unwrap();
+        }
+        assert_eq!(rig.points().0.len(), map.points().len());
+        assert_eq!(map.points().len(), 21);
+    }
+
+    #[test]
+    fn refuses_tiles_smaller_than_voxels() {
+        assert!(RobotMap::new(RobotMapConfig { voxel_m: 0.5, tile_edge_m: 0.2, tile_step_m: 0.01 }).is_err());
+    }
+}
