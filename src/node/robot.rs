@@ -15,9 +15,6 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 
-/// How much lower than the node the map thread runs (nice steps): the map can wait a scan.
-const MAP_NICE: i32 = 5;
-
 /// What the robot node did, for a caller that watches it (the simulated mission).
 #[derive(Debug)]
 pub enum RobotEvent {
@@ -157,15 +154,15 @@ type MapThread = std::thread::JoinHandle<anyhow::Result<()>>;
 type PlacedScans = std::sync::mpsc::Sender<Arc<Vec<WindowPoint>>>;
 type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
 
-/// The map grown on its own thread, below the node's priority, from the placed scans the node
-/// hands it: growing it and encoding tiles (several milliseconds a second) never hold up a scan
-/// or a detection. Every `period` it sends the changed tiles, and the last ones once the node
+/// The map grown on its own thread from the placed scans the node hands it: growing it and
+/// encoding tiles (several milliseconds a second) never hold up a scan or a detection. (At a
+/// lower priority its tiles reached the rig late enough, under load, to cost the auditorium's
+/// first alignment a second.) Every `period` it sends the changed tiles, and the last ones once the node
 /// hangs up.
 fn spawn_map(mut map: RobotMap, period: Duration) -> anyhow::Result<(PlacedScans, EncodedTiles, MapThread)> {
     let (scans_tx, scans_rx) = std::sync::mpsc::channel::<Arc<Vec<WindowPoint>>>();
     let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
     let thread = std::thread::Builder::new().name("robot-map".into()).spawn(move || {
-        super::lower_this_thread(MAP_NICE);
         let mut next = Instant::now() + period;
         loop {
             match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
@@ -175,6 +172,10 @@ fn spawn_map(mut map: RobotMap, period: Duration) -> anyhow::Result<(PlacedScans
             }
             if Instant::now() >= next {
                 next = (next + period).max(Instant::now());
+                // Everything the node has handed over by now goes into these tiles.
+                while let Ok(placed) = scans_rx.try_recv() {
+                    map.add(&placed);
+                }
                 let _ = tiles_tx.send(map.take_changed_tiles()?);
             }
         }
