@@ -155,10 +155,8 @@ type PlacedScans = std::sync::mpsc::Sender<Arc<Vec<WindowPoint>>>;
 type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
 
 /// The map grown on its own thread from the placed scans the node hands it: growing it and
-/// encoding tiles (several milliseconds a second) never hold up a scan or a detection. (At a
-/// lower priority its tiles reached the rig late enough, under load, to cost the auditorium's
-/// first alignment a second.) Every `period` it sends the changed tiles, and the last ones once the node
-/// hangs up.
+/// encoding tiles (several milliseconds a second) never hold up a scan or a detection. Every
+/// `period` it sends the changed tiles, and the last ones once the node hangs up.
 fn spawn_map(mut map: RobotMap, period: Duration) -> anyhow::Result<(PlacedScans, EncodedTiles, MapThread)> {
     let (scans_tx, scans_rx) = std::sync::mpsc::channel::<Arc<Vec<WindowPoint>>>();
     let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
