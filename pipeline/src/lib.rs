@@ -21,6 +21,8 @@ pub mod lio;
 pub mod mission;
 pub mod pose;
 pub mod record;
+#[cfg(test)]
+mod test_rng;
 pub mod voxel_hash;
 
 pub use error::PipelineError;

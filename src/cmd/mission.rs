@@ -244,7 +244,7 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
     write_tum(out, "rig.tum", &rig_tum)?;
     write_tum(out, "rig_world.tum", &world_tum)?;
     let viz_p50 = quantiles(&viz_ms).p50;
-    let (lq, dq) = (super::mission_score::quantiles(&lio_ms), super::mission_score::quantiles(&detect_ms));
+    let (lq, dq) = (quantiles(&lio_ms), quantiles(&detect_ms));
     tracing::info!(
         lio_p50_ms = lq.p50,
         lio_p99_ms = lq.p99,

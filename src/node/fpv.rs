@@ -252,7 +252,7 @@ pub async fn run(
                     }
                     if let Some(r) = recorder.as_mut().filter(|_| summary.frames % cfg.record_frames_every.max(1) == 0)
                     {
-                        r.ar_frame(t_ns, &view.frame);
+                        r.ar_frame(t_ns, snapshot);
                     }
                 }
                 Err(e) => tracing::warn!("frame not published: {e}"),

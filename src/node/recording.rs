@@ -8,9 +8,9 @@
 //! the node; chunks close every second, so a crash leaves a readable file, and `finish` (on
 //! SIGINT/SIGTERM or the end of a run) writes the index. Dropping the recorder finishes it too.
 
+use crate::view::ViewSnapshot;
 use nalgebra::Isometry3;
 use starc_livox::scan::Scan;
-use starc_pipeline::ar::ArFrame;
 use starc_pipeline::lio::ImuSample;
 use starc_pipeline::mission::RobotDetection;
 use starc_pipeline::record::msgs::{Pose, Quaternion, Vector3};
@@ -18,6 +18,7 @@ use starc_pipeline::record::{Frames, PersonBox, Recorder, RecorderOptions, Recor
 use starc_time::{Clock, Stamp};
 use std::path::Path;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 /// Entries the writer may fall behind by: at the Avia's 200 Hz IMU and 10 Hz scans, about four
@@ -30,12 +31,12 @@ enum Entry {
     Imu(ImuSample),
     Pose { t_ns: u64, pose: Isometry3<f64> },
     Detections { t_ns: u64, people: Vec<PersonBox> },
-    ArFrame { t_ns: u64, frame: Box<ArFrame> },
+    ArFrame { t_ns: u64, snapshot: Arc<ViewSnapshot> },
 }
 
 pub struct NodeRecorder {
     tx: Option<SyncSender<Entry>>,
-    writer: Option<JoinHandle<Option<RecorderStats>>>,
+    writer: Option<JoinHandle<Finished>>,
     /// Whether the node has waited on a full queue since the writer last caught up (one warning
     /// per episode, not per entry).
     waited: bool,
@@ -114,39 +115,46 @@ impl NodeRecorder {
         self.send(Entry::Detections { t_ns, people });
     }
 
-    /// An AR frame, PNG-encoded on the writer thread.
-    pub fn ar_frame(&mut self, t_ns: u64, frame: &ArFrame) {
-        self.send(Entry::ArFrame { t_ns, frame: Box::new(frame.clone()) });
+    /// A published AR frame: its PNG (encoded on the writer thread unless a viewer already did).
+    pub fn ar_frame(&mut self, t_ns: u64, snapshot: Arc<ViewSnapshot>) {
+        self.send(Entry::ArFrame { t_ns, snapshot });
     }
 
-    /// Waits for the writer to write everything queued and the index.
+    /// Waits for the writer to write everything queued and the index; an error if the index
+    /// could not be written (a disk error earlier only stopped the recording, with a warning).
     pub fn finish(mut self) -> anyhow::Result<()> {
-        self.close();
-        Ok(())
+        self.close()
     }
 
-    fn close(&mut self) {
+    fn close(&mut self) -> anyhow::Result<()> {
         self.tx = None;
-        if let Some(writer) = self.writer.take() {
-            match writer.join() {
-                Ok(Some(stats)) => tracing::info!(?stats, "recording finished"),
-                Ok(None) => {}
-                Err(_) => tracing::warn!("the recording's writer thread panicked"),
-            }
+        let Some(writer) = self.writer.take() else { return Ok(()) };
+        match writer.join() {
+            Ok(Ok(Some(stats))) => tracing::info!(?stats, "recording finished"),
+            Ok(Ok(None)) => {}
+            Ok(Err(e)) => anyhow::bail!("finishing the recording: {e}"),
+            Err(_) => anyhow::bail!("the recording's writer thread panicked"),
         }
+        Ok(())
     }
 }
 
 impl Drop for NodeRecorder {
     /// A node that stops on an error still leaves a finished file.
     fn drop(&mut self) {
-        self.close();
+        if let Err(e) = self.close() {
+            tracing::warn!("{e}");
+        }
     }
 }
 
-/// The writer thread: every entry until the node hangs up, then the index. Returns the stats
-/// of a recording that finished cleanly.
-fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Option<RecorderStats> {
+/// What the writer thread ends with: the stats of a recording it finished, `None` for one a
+/// write error had already stopped (and finished as far as it could), or the error of the last
+/// finish.
+type Finished = Result<Option<RecorderStats>, starc_pipeline::PipelineError>;
+
+/// The writer thread: every entry until the node hangs up, then the index.
+fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Finished {
     let (points_topic, imu_topic) = (format!("/{device}/points"), format!("/{device}/imu"));
     for entry in rx {
         let (what, result) = match entry {
@@ -167,9 +175,14 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Op
                 ("odometry", result)
             }
             Entry::Detections { t_ns, people } => ("detections", rec.detections(Stamp::new(t_ns, Clock::Ptp), &people)),
-            Entry::ArFrame { t_ns, frame } => {
-                ("AR frame", frame.to_png().and_then(|png| rec.ar_image_png(Stamp::new(t_ns, Clock::Ptp), &png)))
-            }
+            Entry::ArFrame { t_ns, snapshot } => match snapshot.png() {
+                Ok(png) => ("AR frame", rec.ar_image_png(Stamp::new(t_ns, Clock::Ptp), &png)),
+                // The encoder failed on this frame alone: the recording goes on without it.
+                Err(e) => {
+                    tracing::warn!("AR frame at {t_ns} ns not recorded: {e}");
+                    continue;
+                }
+            },
         };
         if let Err(e) = result {
             tracing::warn!("recording stopped: {what}: {e}");
@@ -177,16 +190,10 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Op
                 tracing::warn!("recording not finished cleanly: {e}");
             }
             // Dropping the receiver tells the node to stop sending.
-            return None;
+            return Ok(None);
         }
     }
-    match rec.finish() {
-        Ok(stats) => Some(stats),
-        Err(e) => {
-            tracing::warn!("recording not finished cleanly: {e}");
-            None
-        }
-    }
+    rec.finish().map(Some)
 }
 
 #[cfg(test)]

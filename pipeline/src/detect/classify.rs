@@ -3,9 +3,12 @@
 
 use super::{ClusterFeatures, DetectConfig, PersonPose};
 
-/// 1 inside [lo, hi], falling linearly to 0 at `soft` outside it.
+/// 1 inside [lo, hi], falling linearly to 0 at `soft` outside it; 0 for a feature not measured
+/// (NaN), so that no gate passes on one.
 fn band(x: f64, lo: f64, hi: f64, soft: f64) -> f64 {
-    if x < lo {
+    if x.is_nan() {
+        0.0
+    } else if x < lo {
         (1.0 - (lo - x) / soft).max(0.0)
     } else if x > hi {
         (1.0 - (x - hi) / soft).max(0.0)

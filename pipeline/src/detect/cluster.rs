@@ -74,9 +74,10 @@ impl Grid {
         Self { voxels, index: map, offsets, members }
     }
 
-    /// Every voxel, as the subset [`Self::components`] takes.
-    pub fn all(&self) -> Vec<u32> {
-        (0..self.voxels.len() as u32).collect()
+    /// 26-connected components of the whole grid (on the grid's own index).
+    pub fn all_components(&self) -> Vec<Vec<u32>> {
+        let all: Vec<u32> = (0..self.voxels.len() as u32).collect();
+        self.components_on(&all, &self.index)
     }
 
     /// The window indices of the points in voxel `v`.
@@ -95,18 +96,18 @@ impl Grid {
 
     /// 26-connected components of a set of voxels (indices into `voxels`).
     pub fn components(&self, subset: &[u32]) -> Vec<Vec<u32>> {
-        // The whole grid (every window's first call) is indexed already: position i is voxel i.
-        let whole = subset.len() == self.voxels.len() && subset.iter().enumerate().all(|(i, &v)| i as u32 == v);
-        let mut built: KeyMap<u32> = KeyMap::default();
-        if !whole {
-            built.reserve(subset.len());
-            for (i, &v) in subset.iter().enumerate() {
-                if let Some(vox) = self.voxels.get(v as usize) {
-                    built.insert(vox.key, i as u32);
-                }
+        let mut local: KeyMap<u32> = KeyMap::default();
+        local.reserve(subset.len());
+        for (i, &v) in subset.iter().enumerate() {
+            if let Some(vox) = self.voxels.get(v as usize) {
+                local.insert(vox.key, i as u32);
             }
         }
-        let local = if whole { &self.index } else { &built };
+        self.components_on(subset, &local)
+    }
+
+    /// [`Self::components`] with `local` mapping each voxel key of `subset` to its position there.
+    fn components_on(&self, subset: &[u32], local: &KeyMap<u32>) -> Vec<Vec<u32>> {
         let mut parent: Vec<u32> = (0..subset.len() as u32).collect();
         for (i, &v) in subset.iter().enumerate() {
             let Some(vox) = self.voxels.get(v as usize) else { continue };

@@ -118,7 +118,6 @@ impl Detector for GeometricDetector {
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
-        let all = grid.all();
         let points = window.points;
         let lookup = |i: u32| {
             points.get(i as usize).map(|p| {
@@ -129,7 +128,7 @@ impl Detector for GeometricDetector {
         // Voxels needed before a cluster is worth scoring: a person at the far end of the
         // window still fills a few.
         let min_voxels = 3;
-        let mut stack: Vec<(Vec<u32>, usize)> = grid.components(&all).into_iter().map(|c| (c, 0)).collect();
+        let mut stack: Vec<(Vec<u32>, usize)> = grid.all_components().into_iter().map(|c| (c, 0)).collect();
         while let Some((cluster, depth)) = stack.pop() {
             if cluster.len() < min_voxels {
                 continue;
@@ -162,12 +161,10 @@ impl Detector for GeometricDetector {
             else {
                 continue;
             };
-            // Not measured: no face share could have passed it (`score` would take NaN as 0).
-            let unmeasured = f.face_share.is_nan();
             let (mut pose, mut s) = score(&f, cfg);
             // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
             let structure = f.top_m > top - CEILING_CONTACT_M;
-            if structure || unmeasured {
+            if structure {
                 s = 0.0;
             }
             if self.keep_cluster_points {
@@ -201,7 +198,7 @@ impl Detector for GeometricDetector {
             );
             if s >= cfg.min_score {
                 confirmed_now.push((xy, now_ns));
-            } else if !structure && !unmeasured && follow_ns > 0 && near_followed(xy) {
+            } else if !structure && follow_ns > 0 && near_followed(xy) {
                 // Someone every gate saw here moments ago: judged as a partial view of them.
                 (pose, s) = score_followed(&f, cfg);
             }
