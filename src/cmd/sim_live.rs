@@ -175,58 +175,12 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
 
     let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
     let total_s = deadline.saturating_duration_since(Instant::now()).as_secs_f64();
-    let (mut robot_tum, mut rig_tum) = (Vec::new(), Vec::new());
-    let (mut slam, mut comm, mut viz, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut detections, mut frames) = (0u64, 0u64);
-    let mut detect_ms = Vec::new();
-    let png_dir = opts.out.join("ar");
-    let mut scoring_error: Option<anyhow::Error> = None;
+    let mut tally = Tally::new(opts, lidar_t_camera);
     let mut last_progress = Instant::now();
     loop {
         let now = Instant::now();
         let finished = now >= deadline || robot.is_finished() || fpv.is_finished();
-        while let Ok(ev) = robot_rx.try_recv() {
-            match ev {
-                RobotEvent::Pose { end_ns, lidar_pose, .. } => {
-                    score.robot_pose(end_ns, &lidar_pose);
-                    robot_tum.push(tum_line(end_ns, &lidar_pose));
-                }
-                RobotEvent::Detection { detection } => {
-                    detections += 1;
-                    detect_ms.push(detection.detect_ms);
-                    score.detection(&detection);
-                }
-            }
-        }
-        while let Ok(ev) = fpv_rx.try_recv() {
-            match ev {
-                FpvEvent::Started { first_ns } => score.rig_started(first_ns),
-                FpvEvent::Alignment { end_ns, world_t_lidar, total_ms, verdict } => {
-                    score.alignment(end_ns, &world_t_lidar, total_ms, matches!(verdict, AlignVerdict::Accepted { .. }));
-                }
-                FpvEvent::Frame { index, t_ns, view, render_ms } => {
-                    frames += 1;
-                    rig_tum.push(tum_line(t_ns, &(view.world_t_camera * lidar_t_camera.inverse())));
-                    if let Some(f) = score.truth.frames.iter().find(|f| f.index == index).cloned() {
-                        let keep = (opts.frames_every > 0 && index.is_multiple_of(opts.frames_every))
-                            .then_some(png_dir.as_path());
-                        if let Err(e) = score.frame(&f, &view, render_ms, keep) {
-                            scoring_error.get_or_insert(e);
-                        }
-                    }
-                }
-                // L_SLAM and L_comm of every detection with people; L_viz and the total of those
-                // drawn (the rig aligned).
-                FpvEvent::Received { slam_ns, comm_ns } => {
-                    slam.push(slam_ns as f64 * 1e-6);
-                    comm.push(comm_ns as f64 * 1e-6);
-                }
-                FpvEvent::Shown { slam_ns, comm_ns, viz_ns } => {
-                    viz.push(viz_ns as f64 * 1e-6);
-                    total.push((slam_ns + comm_ns + viz_ns) as f64 * 1e-6);
-                }
-            }
-        }
+        tally.drain(&mut score, &mut robot_rx, &mut fpv_rx);
         if finished {
             break;
         }
@@ -234,8 +188,10 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
             last_progress = now;
             let left = deadline.saturating_duration_since(now).as_secs_f64();
             eprintln!(
-                "live mission: {:.0} / {total_s:.0} s, {detections} detection windows, {frames} frames scored",
-                total_s - left
+                "live mission: {:.0} / {total_s:.0} s, {} detection windows, {} frames scored",
+                total_s - left,
+                tally.detections,
+                tally.frames
             );
         }
         std::thread::sleep(Duration::from_millis(5));
@@ -245,11 +201,15 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     std::thread::sleep(RIG_DRAIN);
     let _ = fpv_stop_tx.send(true);
     let fpv_summary = fpv.join().map_err(|_| anyhow::anyhow!("the rig node panicked"))?;
+    // What the nodes did between the last look and their stop is scored too: the replay of
+    // their recordings sees all of it.
+    tally.drain(&mut score, &mut robot_rx, &mut fpv_rx);
     for m in mocks.drain(..) {
         let _ = mocks_rt.block_on(m.stop());
     }
     let robot_summary = robot_summary.context("robot node")?;
     let fpv_summary = fpv_summary.context("rig node")?;
+    let Tally { robot_tum, rig_tum, slam, comm, viz, total, detect_ms, scoring_error, .. } = tally;
     if let Some(e) = scoring_error {
         return Err(e);
     }
@@ -291,4 +251,92 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         opts.out.display()
     )?;
     Ok(())
+}
+
+/// What the harness hears from the nodes while they run, scored as it comes.
+struct Tally {
+    robot_tum: Vec<String>,
+    rig_tum: Vec<String>,
+    slam: Vec<f64>,
+    comm: Vec<f64>,
+    viz: Vec<f64>,
+    total: Vec<f64>,
+    detect_ms: Vec<f64>,
+    detections: u64,
+    frames: u64,
+    scoring_error: Option<anyhow::Error>,
+    png_dir: PathBuf,
+    frames_every: u64,
+    lidar_t_camera: Isometry3<f64>,
+}
+
+impl Tally {
+    fn new(opts: &LiveOptions, lidar_t_camera: Isometry3<f64>) -> Self {
+        Self {
+            robot_tum: Vec::new(),
+            rig_tum: Vec::new(),
+            slam: Vec::new(),
+            comm: Vec::new(),
+            viz: Vec::new(),
+            total: Vec::new(),
+            detect_ms: Vec::new(),
+            detections: 0,
+            frames: 0,
+            scoring_error: None,
+            png_dir: opts.out.join("ar"),
+            frames_every: opts.frames_every,
+            lidar_t_camera,
+        }
+    }
+
+    /// Scores everything the nodes have sent so far.
+    fn drain(
+        &mut self,
+        score: &mut Scorer,
+        robot_rx: &mut mpsc::UnboundedReceiver<RobotEvent>,
+        fpv_rx: &mut mpsc::UnboundedReceiver<FpvEvent>,
+    ) {
+        while let Ok(ev) = robot_rx.try_recv() {
+            match ev {
+                RobotEvent::Pose { end_ns, lidar_pose, .. } => {
+                    score.robot_pose(end_ns, &lidar_pose);
+                    self.robot_tum.push(tum_line(end_ns, &lidar_pose));
+                }
+                RobotEvent::Detection { detection } => {
+                    self.detections += 1;
+                    self.detect_ms.push(detection.detect_ms);
+                    score.detection(&detection);
+                }
+            }
+        }
+        while let Ok(ev) = fpv_rx.try_recv() {
+            match ev {
+                FpvEvent::Started { first_ns } => score.rig_started(first_ns),
+                FpvEvent::Alignment { end_ns, world_t_lidar, total_ms, verdict } => {
+                    score.alignment(end_ns, &world_t_lidar, total_ms, matches!(verdict, AlignVerdict::Accepted { .. }));
+                }
+                FpvEvent::Frame { index, t_ns, view, render_ms } => {
+                    self.frames += 1;
+                    self.rig_tum.push(tum_line(t_ns, &(view.world_t_camera * self.lidar_t_camera.inverse())));
+                    if let Some(f) = score.truth.frames.iter().find(|f| f.index == index).cloned() {
+                        let keep = (self.frames_every > 0 && index.is_multiple_of(self.frames_every))
+                            .then_some(self.png_dir.as_path());
+                        if let Err(e) = score.frame(&f, &view, render_ms, keep) {
+                            self.scoring_error.get_or_insert(e);
+                        }
+                    }
+                }
+                // L_SLAM and L_comm of every detection with people; L_viz and the total of those
+                // drawn (the rig aligned).
+                FpvEvent::Received { slam_ns, comm_ns } => {
+                    self.slam.push(slam_ns as f64 * 1e-6);
+                    self.comm.push(comm_ns as f64 * 1e-6);
+                }
+                FpvEvent::Shown { slam_ns, comm_ns, viz_ns } => {
+                    self.viz.push(viz_ns as f64 * 1e-6);
+                    self.total.push((slam_ns + comm_ns + viz_ns) as f64 * 1e-6);
+                }
+            }
+        }
+    }
 }
