@@ -18,6 +18,8 @@ pub struct IcpParams {
     pub max_iterations: u32,
     pub converged_update: f64,
     pub inlier_distance_m: f64,
+    /// Correspondences within this residual make up the information matrix.
+    pub degeneracy_residual_m: f64,
 }
 
 pub struct IcpResult {
@@ -109,7 +111,7 @@ pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &Icp
     } else {
         (pairs.iter().map(|x| x.r * x.r).sum::<f64>() / pairs.len() as f64).sqrt()
     };
-    let info = information(&pairs);
+    let info = information(&pairs, p.degeneracy_residual_m);
     IcpResult {
         pose,
         iterations,
@@ -130,7 +132,13 @@ pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &Icp
 /// index: near 0, some direction (a corridor's axis, a rotation about a lone wall's normal) is
 /// not constrained by the geometry; a box-like room gives about 0.05-0.2. Returns the matrix,
 /// the centroid and the RMS radius; `None` with fewer than 6 pairs.
-fn information(pairs: &[Pair]) -> Option<(Matrix6<f64>, Vec3, f64)> {
+///
+/// Only pairs with a residual within `tight_m` add to the sum, which is still divided by every
+/// pair: misfit points (a wall seen at a slight angle off its place) would otherwise look like
+/// constraints, and a result that fits only in part is only partly pinned down.
+fn information(pairs: &[Pair], tight_m: f64) -> Option<(Matrix6<f64>, Vec3, f64)> {
+    let all = pairs.len() as f64;
+    let pairs: Vec<&Pair> = pairs.iter().filter(|p| p.r.abs() <= tight_m).collect();
     if pairs.len() < 6 {
         return None;
     }
@@ -143,6 +151,62 @@ fn information(pairs: &[Pair]) -> Option<(Matrix6<f64>, Vec3, f64)> {
         let j = Vector6::new(a.x, a.y, a.z, p.n.x, p.n.y, p.n.z);
         h += j * j.transpose();
     }
-    h /= n;
+    h /= all;
     Some((h, centroid, radius))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A corridor along x: walls (normals ±y), floor and ceiling (normals ±z), fitting tightly;
+    /// plus a share of misfit points whose nearest planes face along x, far off their residual.
+    fn corridor(misfit_residual_m: f64) -> Vec<Pair> {
+        let mut rnd = crate::test_rng::uniform(7);
+        let mut pairs = Vec::new();
+        for i in 0..400 {
+            let q = Vec3::new(rnd() * 20.0 - 10.0, rnd() * 2.0 - 1.0, rnd() * 2.5);
+            let n = match i % 4 {
+                0 => Vec3::y(),
+                1 => -Vec3::y(),
+                2 => Vec3::z(),
+                _ => -Vec3::z(),
+            };
+            pairs.push(Pair { q, n, r: (rnd() - 0.5) * 0.02 });
+        }
+        for _ in 0..60 {
+            let q = Vec3::new(rnd() * 20.0 - 10.0, rnd() * 2.0 - 1.0, rnd() * 2.5);
+            pairs.push(Pair { q, n: Vec3::x(), r: misfit_residual_m });
+        }
+        pairs
+    }
+
+    fn index(pairs: &[Pair], tight_m: f64) -> f64 {
+        information(pairs, tight_m).map_or(0.0, |i| SymmetricEigen::new(i.0).eigenvalues.min())
+    }
+
+    #[test]
+    fn misfit_points_do_not_pin_a_corridor_down() {
+        let misfit = corridor(0.2);
+        // Every pair counted: the misfits hold the corridor's axis.
+        assert!(index(&misfit, f64::INFINITY) > 0.01, "{}", index(&misfit, f64::INFINITY));
+        // Only the pairs that fit: the axis is free.
+        assert!(index(&misfit, 0.05) < 1e-6, "{}", index(&misfit, 0.05));
+        // Had the same points fitted, they would pin it down with either count.
+        let fitting = corridor(0.01);
+        assert!(index(&fitting, 0.05) > 0.01);
+        assert!((index(&fitting, 0.05) - index(&fitting, f64::INFINITY)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_partial_fit_is_only_partly_pinned_down() {
+        // Half the pairs far off: the tight half still spans every direction, at half the weight.
+        let mut pairs = corridor(0.01);
+        let tight = index(&pairs, 0.05);
+        let n = pairs.len();
+        pairs.extend((0..n).map(|i| Pair { q: Vec3::new(i as f64 * 0.01, 0.0, 0.0), n: Vec3::y(), r: 0.3 }));
+        let half = index(&pairs, 0.05);
+        assert!((half - tight / 2.0).abs() < 1e-9, "{half} vs {tight}");
+        assert!(information(&pairs[..5], 0.05).is_none());
+    }
 }

@@ -375,6 +375,7 @@ impl Aligner {
             max_iterations: c.icp_max_iterations,
             converged_update: c.icp_converged_update,
             inlier_distance_m: c.inlier_distance_m,
+            degeneracy_residual_m: c.degeneracy_residual_m,
         }
     }
 
