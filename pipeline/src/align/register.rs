@@ -24,7 +24,9 @@ pub struct AlignMetrics {
     pub update_norm: f64,
     /// Smallest eigenvalue of the normalised point-to-plane information matrix at the result:
     /// `λmin(Σ JᵢᵀJᵢ / N)` with `Jᵢ = [((qᵢ - c) × nᵢ)/ρ, nᵢ]`, `c` the centroid of the matched points
-    /// and `ρ` their RMS distance from it. Unit-free, in [0, 1/3]; near 0 means a degenerate direction.
+    /// and `ρ` their RMS distance from it; the sum over the kept correspondences whose residual is
+    /// within `degeneracy_residual_m`, N all of them. Unit-free, in [0, 1/3]; near 0 means a
+    /// degenerate direction.
     pub degeneracy_index: f64,
     /// Correspondences ICP kept at the result.
     pub correspondences: usize,
