@@ -108,7 +108,7 @@ impl Default for DetectConfig {
             upper_body_height_m: [0.25, 1.2],
             upper_body_top_m: [0.9, 2.6],
             upright_max_length_m: 1.1,
-            lying_length_m: [1.0, 2.2],
+            lying_length_m: [1.1, 2.2],
             lying_max_width_m: 0.8,
             max_bottom_m: 1.2,
             face_tolerance_m: 0.04,

@@ -355,6 +355,13 @@ fn a_followed_lying_person_may_be_shorter_than_a_lying_person_alone() {
     assert!(score_followed(&f, &cfg).1 >= cfg.min_score);
     let short = ClusterFeatures { size: Vector3::new(0.3, 0.3, 0.18), ..f };
     assert!(score_followed(&short, &cfg).1 < cfg.min_score, "a 0.3 m stub is no one");
+    // Alone, a lying person is at least about 1.1 m long: the tactical house's clutter boxes
+    // side by side (0.93-0.96 x 0.55-0.65 x 0.27 m) passed as one at 1.0 m.
+    let boxes = ClusterFeatures { size: Vector3::new(0.96, 0.55, 0.27), ..f };
+    assert!(score(&boxes, &cfg).1 < cfg.min_score, "{:?}", score(&boxes, &cfg));
+    let body = ClusterFeatures { size: Vector3::new(1.3, 0.5, 0.27), ..f };
+    assert_eq!(score(&body, &cfg).0, PersonPose::Lying);
+    assert!(score(&body, &cfg).1 >= cfg.min_score, "{:?}", score(&body, &cfg));
 }
 
 #[test]
