@@ -23,6 +23,7 @@ mod tiles;
 
 pub use config::AlignConfig;
 pub use free_space::{FreeSpace, Ray};
+pub(crate) use geometry::key_of;
 pub use geometry::{
     cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample,
     voxel_downsample_every, Vec3, VoxelIndex,

@@ -67,12 +67,18 @@ fn window(points: &[WindowPoint]) -> DetectWindow<'_> {
     DetectWindow { stamp: Stamp::new(42, Clock::Ptp), sensor_pose: Isometry3::translation(0.0, 0.0, 0.45), points }
 }
 
+/// The scene through a detector with the default config: the detector and what it found.
+fn detect_scene(points: &[WindowPoint]) -> (GeometricDetector, Vec<Detection>) {
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut found = Vec::new();
+    det.detect(&window(points), &mut found);
+    (det, found)
+}
+
 #[test]
 fn finds_the_standing_and_the_lying_person_only() {
     let points = scene();
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
-    let mut found = Vec::new();
-    det.detect(&window(&points), &mut found);
+    let (det, found) = detect_scene(&points);
     let floor = det.last_floor().unwrap();
     assert!(floor.c.abs() < 0.03 && floor.a.abs() < 0.01, "{floor:?}");
     let ceiling = floor.ceiling_above_floor_m.unwrap();
@@ -369,9 +375,7 @@ fn the_face_share_is_measured_only_where_it_can_decide() {
     // The scene's people have theirs measured; the cardboard box (no posture fits a 0.5 m cube
     // 0.6 m high whatever its faces) is left unmeasured, and the tuning mode measures every one.
     let points = scene();
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
-    let mut found = Vec::new();
-    det.detect(&window(&points), &mut found);
+    let (mut det, _) = detect_scene(&points);
     let near = |f: &ClusterFeatures, x: f64, y: f64| (f.centre.x - x).hypot(f.centre.y - y) < 0.4;
     let clusters = det.last_clusters().to_vec();
     let person = clusters.iter().find(|(f, _)| near(f, 4.0, 1.0)).expect("the standing person is scored");

@@ -2,9 +2,9 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::encode_tiles;
+use crate::align::{encode_tiles, key_of};
 use crate::detect::WindowPoint;
-use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
+use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
 
@@ -49,9 +49,9 @@ impl RobotMap {
     /// Adds a placed scan's points (world frame): the first point of each new voxel is kept.
     pub fn add(&mut self, points: &[WindowPoint]) {
         let per_tile = self.voxels_per_tile();
+        let inv_voxel_m = 1.0 / self.cfg.voxel_m;
         for p in points {
-            let v = p.xyz() / self.cfg.voxel_m;
-            let key = (floor_i32(v.x), floor_i32(v.y), floor_i32(v.z));
+            let key = key_of(&p.xyz(), inv_voxel_m);
             if self.voxels.insert(key) {
                 let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
                 self.tiles.entry(tile).or_default().push(p.xyz());
