@@ -78,7 +78,7 @@ fn main() {
             if core.wants_map() && rc.map_len() != core.map_len() {
                 core.set_map(rc.map_points());
             }
-            let Some(job) = core.next_job() else { continue };
+            let Some(job) = core.next_job(Vec::new) else { continue };
             let end = job.end_ns;
             let truth = l_t_w * tum::truth_at(&gt_fpv, end);
             let t_s = (end - first) as f64 * 1e-9;

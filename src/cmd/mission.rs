@@ -180,7 +180,7 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
             if rig.wants_map() && robot.map_len() != rig.map_len() {
                 rig.set_map(robot.map_points());
             }
-            if let Some(job) = rig.next_job() {
+            if let Some(job) = rig.next_job(|| overlay.boxes_at(o.end_ns)) {
                 let end_ns = job.end_ns;
                 let outcome = job.run();
                 let (world_t_lidar, ms) = outcome

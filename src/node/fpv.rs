@@ -202,7 +202,8 @@ pub async fn run(
             tiles_changed = false;
         }
         if job.is_none() {
-            if let Some(j) = core.next_job() {
+            let now_ns = core.last().map_or(0, |(t, _)| t);
+            if let Some(j) = core.next_job(|| overlay.boxes_at(now_ns)) {
                 job = Some(super::background::spawn_low_priority("rig-align", move || j.run()));
             }
         }

@@ -36,16 +36,37 @@ pub fn voxel_downsample_every(points: &[Vec3], voxel_m: f64, stride: usize) -> V
     if voxel_m.is_nan() || voxel_m <= 0.0 {
         return points.to_vec();
     }
-    let inv = 1.0 / voxel_m;
-    let mut sums: KeyMap<(Vec3, u32)> = KeyMap::default();
+    let mut means = VoxelMeans::new(voxel_m);
     for p in points.iter().step_by(stride.max(1)) {
-        let e = sums.entry(key_of(p, inv)).or_insert((Vec3::zeros(), 0));
+        means.add(p);
+    }
+    means.finish()
+}
+
+/// [`voxel_downsample`] of points given one at a time (no buffer of them all).
+pub struct VoxelMeans {
+    inv: f64,
+    sums: KeyMap<(Vec3, u32)>,
+}
+
+impl VoxelMeans {
+    /// Voxels of `voxel_m` (at least 1 mm).
+    pub fn new(voxel_m: f64) -> Self {
+        Self { inv: 1.0 / voxel_m.max(1e-3), sums: KeyMap::default() }
+    }
+
+    pub fn add(&mut self, p: &Vec3) {
+        let e = self.sums.entry(key_of(p, self.inv)).or_insert((Vec3::zeros(), 0));
         e.0 += p;
         e.1 += 1;
     }
-    let mut cells: Vec<(Key, Vec3)> = sums.into_iter().map(|(k, (s, n))| (k, s / f64::from(n))).collect();
-    cells.sort_unstable_by_key(|c| c.0);
-    cells.into_iter().map(|c| c.1).collect()
+
+    /// One point per voxel, the mean of its points, in voxel order.
+    pub fn finish(self) -> Vec<Vec3> {
+        let mut cells: Vec<(Key, Vec3)> = self.sums.into_iter().map(|(k, (s, n))| (k, s / f64::from(n))).collect();
+        cells.sort_unstable_by_key(|c| c.0);
+        cells.into_iter().map(|c| c.1).collect()
+    }
 }
 
 /// Points bucketed by voxel for radius-bounded neighbour queries (the 27 cells around a query).

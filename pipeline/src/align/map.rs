@@ -6,7 +6,9 @@
 //! - the rig's source: scans over a window placed by their LIO poses, with points inside given
 //!   exclusion boxes (people) and moving points left out, downsampled ([`aggregate_window`]).
 
-use super::geometry::{estimate_normals, key_of, voxel_downsample, KeyMap, Vec3};
+use super::carve::seen_through;
+use super::free_space::Ray;
+use super::geometry::{estimate_normals, key_of, voxel_downsample, KeyMap, Vec3, VoxelMeans};
 use crate::PipelineError;
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -177,11 +179,30 @@ pub struct WindowConfig {
     pub slices: usize,
     pub min_slices: usize,
     pub motion_voxel_m: f64,
+    /// With the window's rays given, moving points are found by them instead: a voxel (of
+    /// `motion_voxel_m`) seen in at most `carve_max_seen` slices of `carve_slice_s` and crossed
+    /// by rays at least `carve_min_rays` times in slices in which nothing was seen in it held
+    /// something that left ([`seen_through`]; `carve_min_rays` 0: the slices above decide even
+    /// then).
+    pub carve_min_rays: u32,
+    pub carve_max_seen: u32,
+    pub carve_slice_s: f64,
+    /// The first metres of a ray do not count as crossed (the rig itself, its operator).
+    pub carve_near_m: f64,
 }
 
 impl Default for WindowConfig {
     fn default() -> Self {
-        Self { voxel_m: 0.1, slices: 5, min_slices: 2, motion_voxel_m: 0.3 }
+        Self {
+            voxel_m: 0.1,
+            slices: 5,
+            min_slices: 2,
+            motion_voxel_m: 0.3,
+            carve_min_rays: 2,
+            carve_max_seen: 2,
+            carve_slice_s: 0.5,
+            carve_near_m: 0.5,
+        }
     }
 }
 
@@ -195,10 +216,8 @@ pub struct AggregateStats {
 }
 
 /// The rig's source: every `(t_ns, point in the LiDAR frame)` of the window moved by `pose_at(t)`
-/// (its LIO pose, into the odometry frame) and then by `frame` (e.g. the inverse pose at the
-/// window's end), leaving out points the pose lookup cannot place, points inside `boxes` (given in
-/// the odometry frame) and points of voxels seen in fewer than `min_slices` time slices; then
-/// reduced to `voxel_m`.
+/// (its LIO pose, into the odometry frame), leaving out points the pose lookup cannot place, then
+/// [`filter_window`].
 pub fn aggregate_window(
     points: &[(u64, Vec3)],
     pose_at: impl Fn(u64) -> Option<Isometry3<f64>>,
@@ -206,37 +225,96 @@ pub fn aggregate_window(
     boxes: &[ExclusionBox],
     c: &WindowConfig,
 ) -> (Vec<Vec3>, AggregateStats) {
-    let mut stats = AggregateStats { points_in: points.len(), ..AggregateStats::default() };
-    let (t0, t1) = points.iter().fold((u64::MAX, 0), |(a, b), (t, _)| (a.min(*t), b.max(*t)));
-    let span = (t1.saturating_sub(t0)).max(1);
-    let slices = c.slices.max(1);
-    let mut placed = Vec::with_capacity(points.len());
-    for (t, p) in points {
-        let Some(pose) = pose_at(*t) else { continue };
-        let q = (pose * Point3::from(*p)).coords;
-        if boxes.iter().any(|b| b.contains(&q)) {
+    let t0 = points.iter().map(|(t, _)| *t).min().unwrap_or(0);
+    let placed: Vec<PlacedPoint> = points
+        .iter()
+        .filter_map(|(t, p)| Some(PlacedPoint::new((t - t0) / 1000, &(pose_at(*t)? * Point3::from(*p)).coords)))
+        .collect();
+    let (out, stats) = filter_window(&placed, &[], frame, boxes, c);
+    (out, AggregateStats { points_in: points.len(), ..stats })
+}
+
+/// A window point placed in the odometry frame, kept small (a 10 s window holds millions): its
+/// time in microseconds from any start the caller picks (time differences are all that count),
+/// and where it is (f32: a window spans metres, not kilometres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlacedPoint {
+    pub t_us: u32,
+    pub xyz: [f32; 3],
+}
+
+impl PlacedPoint {
+    pub fn new(t_us: u64, p: &Vec3) -> Self {
+        Self { t_us: u32::try_from(t_us).unwrap_or(u32::MAX), xyz: [p.x as f32, p.y as f32, p.z as f32] }
+    }
+
+    pub fn xyz(&self) -> Vec3 {
+        Vec3::new(f64::from(self.xyz[0]), f64::from(self.xyz[1]), f64::from(self.xyz[2]))
+    }
+}
+
+/// Points of a window already placed in the odometry frame: those inside
+/// `boxes` and the moving ones left out, the rest moved by `frame` (e.g. the inverse pose at the
+/// window's end) and reduced to `voxel_m`. Moving points are those in voxels the window's `rays`
+/// (with their firing times) saw through ([`seen_through`]) or, without rays, those of voxels
+/// seen in fewer than `min_slices` time slices. `boxes` and `rays` are in the odometry frame too.
+pub fn filter_window(
+    placed: &[PlacedPoint],
+    rays: &[(u32, Ray)],
+    frame: &Isometry3<f64>,
+    boxes: &[ExclusionBox],
+    c: &WindowConfig,
+) -> (Vec<Vec3>, AggregateStats) {
+    let mut stats = AggregateStats { points_in: placed.len(), ..AggregateStats::default() };
+    let (t0, t1) = placed.iter().fold((u32::MAX, 0), |(a, b), p| (a.min(p.t_us), b.max(p.t_us)));
+    let span = u64::from(t1.saturating_sub(t0)).max(1);
+    let carve = !rays.is_empty() && c.carve_min_rays > 0;
+    let slices = if carve {
+        ((span as f64 * 1e-6 / c.carve_slice_s.max(1e-3)).ceil() as usize).clamp(1, 64)
+    } else {
+        c.slices.max(1)
+    };
+    let slice_of = |t: u32| ((u64::from(t.saturating_sub(t0)) * slices as u64 / (span + 1)) as usize).min(slices - 1);
+    let outside = |q: &Vec3| boxes.is_empty() || !boxes.iter().any(|b| b.contains(q));
+    let inv = 1.0 / c.motion_voxel_m.max(1e-3);
+    // Which slices saw a point in each voxel (a bit set: up to 64 slices).
+    let mut seen: KeyMap<u64> = KeyMap::default();
+    for p in placed {
+        let q = p.xyz();
+        if outside(&q) {
+            *seen.entry(key_of(&q, inv)).or_insert(0) |= 1u64 << slice_of(p.t_us).min(63);
+        } else {
             stats.excluded_boxes += 1;
+        }
+    }
+    let through = if carve {
+        let timed: Vec<(u32, Ray)> = rays.iter().map(|(t, r)| (slice_of(*t) as u32, *r)).collect();
+        seen_through(&timed, &seen, c.motion_voxel_m, c.carve_near_m, c.carve_min_rays, c.carve_max_seen)
+    } else {
+        KeyMap::default()
+    };
+    let need = c.min_slices.clamp(1, slices.min(64)) as u32;
+    let still = |q: &Vec3| {
+        if carve {
+            !through.contains_key(&key_of(q, inv))
+        } else {
+            seen.get(&key_of(q, inv)).is_some_and(|m| m.count_ones() >= need)
+        }
+    };
+    // Reduced as they come: a window's kept points need no buffer of their own.
+    let mut kept = VoxelMeans::new(c.voxel_m);
+    for p in placed {
+        let q = p.xyz();
+        if !outside(&q) {
             continue;
         }
-        let slice = ((t - t0) as u128 * slices as u128 / (span as u128 + 1)) as usize;
-        placed.push((q, slice.min(slices - 1)));
-    }
-    // Which slices saw each voxel (a bit set: up to 64 slices).
-    let inv = 1.0 / c.motion_voxel_m.max(1e-3);
-    let mut seen: KeyMap<u64> = KeyMap::default();
-    for (q, s) in &placed {
-        *seen.entry(key_of(q, inv)).or_insert(0) |= 1u64 << (*s).min(63);
-    }
-    let need = c.min_slices.clamp(1, slices.min(64)) as u32;
-    let mut kept = Vec::with_capacity(placed.len());
-    for (q, _) in &placed {
-        if seen.get(&key_of(q, inv)).is_some_and(|m| m.count_ones() >= need) {
-            kept.push((frame * Point3::from(*q)).coords);
+        if still(&q) {
+            kept.add(&(frame * Point3::from(q)).coords);
         } else {
             stats.excluded_moving += 1;
         }
     }
-    let out = voxel_downsample(&kept, c.voxel_m);
+    let out = kept.finish();
     stats.points_out = out.len();
     (out, stats)
 }

@@ -12,6 +12,7 @@
 //! # Ok(()) }
 //! ```
 
+mod carve;
 mod config;
 mod free_space;
 mod geometry;
@@ -21,6 +22,7 @@ mod ndt;
 mod register;
 mod tiles;
 
+pub use carve::seen_through;
 pub use config::AlignConfig;
 pub use free_space::{FreeSpace, Ray};
 pub(crate) use geometry::key_of;
@@ -29,8 +31,8 @@ pub use geometry::{
     voxel_downsample_every, Vec3, VoxelIndex,
 };
 pub use map::{
-    aggregate_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig, PreparedMap,
-    WindowConfig,
+    aggregate_window, filter_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig,
+    PlacedPoint, PreparedMap, WindowConfig,
 };
 pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Probe, Seed};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};

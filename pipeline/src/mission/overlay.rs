@@ -5,7 +5,7 @@
 //! A person seen moving is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
 //! they were last seen, their points no longer show where they are.
 
-use crate::ar::ArPerson;
+use crate::ar::{ArPerson, OrientedBox};
 use nalgebra::Vector3;
 use std::collections::VecDeque;
 
@@ -76,6 +76,11 @@ impl Overlay {
             }
         }
         out
+    }
+
+    /// The boxes of the people [`Overlay::at`] would draw at `t_ns`.
+    pub fn boxes_at(&self, t_ns: u64) -> Vec<OrientedBox> {
+        self.at(t_ns).into_iter().filter_map(|p| p.bbox).collect()
     }
 
     /// The earliest sighting near `centre` in the `CONFIRM_NS` before `stamp_ns` and at least

@@ -7,7 +7,10 @@
 //! [`RigCore::apply`].
 
 use super::place::{ScanPlacer, ScanPoses};
-use crate::align::{voxel_downsample, AlignConfig, AlignReport, Aligner, Ray};
+use crate::align::{
+    filter_window, AggregateStats, AlignConfig, AlignReport, Aligner, ExclusionBox, PlacedPoint, Ray, WindowConfig,
+};
+use crate::ar::OrientedBox;
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use crate::PipelineError;
@@ -32,8 +35,12 @@ pub struct RigCoreConfig {
     pub track_window_ns: u64,
     pub retry_ns: u64,
     pub reregister_ns: u64,
-    /// Both sides are reduced to voxels of this size before registration.
-    pub voxel_m: f64,
+    /// The window's aggregation: moving points left out, then voxels of `window.voxel_m` (the
+    /// robot's map comes reduced to the same size).
+    pub window: WindowConfig,
+    /// People the robot reports are left out of the window in boxes this much larger than
+    /// theirs on every side (arms, the scan's smear).
+    pub people_margin_m: f64,
     /// The robot's map must hold this many voxels before the rig tries.
     pub min_map_points: usize,
     /// A first alignment farther than this from the expected start is refused.
@@ -60,7 +67,8 @@ impl Default for RigCoreConfig {
             track_window_ns: 3_000_000_000,
             retry_ns: 1_000_000_000,
             reregister_ns: 5_000_000_000,
-            voxel_m: 0.1,
+            window: WindowConfig::default(),
+            people_margin_m: 0.15,
             min_map_points: 1000,
             start_gate_m: 2.0,
         }
@@ -75,7 +83,9 @@ pub struct AlignJob {
     pub end_ns: u64,
     pub tracking: bool,
     window_ns: u64,
-    voxel_m: f64,
+    window: WindowConfig,
+    /// People to leave out, in the rig's odometry frame.
+    people: Vec<ExclusionBox>,
     scans: Vec<Arc<LioScan>>,
     odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
@@ -88,6 +98,8 @@ pub struct AlignJob {
 pub struct AlignOutcome {
     pub end_ns: u64,
     pub tracking: bool,
+    /// What the window's aggregation kept and left out (people, moving points).
+    pub window: AggregateStats,
     pub report: AlignReport,
     /// The rig's LiDAR pose in the robot's world, as registered.
     pub world_t_lidar: Isometry3<f64>,
@@ -111,8 +123,26 @@ impl AlignJob {
         // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
         // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
         // off and accepted it; reduced alike, it refuses.)
-        let (raw, rays, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
-        let source = voxel_downsample(&raw, self.voxel_m);
+        let (placed, rays, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
+        let inv = frame.inverse();
+        let (source, kept) = filter_window(&placed, &rays, &inv, &self.people, &self.window);
+        drop(placed);
+        let rays: Vec<Ray> = rays
+            .iter()
+            .map(|(_, r)| Ray {
+                origin: (inv * Point3::from(r.origin)).coords,
+                end: (inv * Point3::from(r.end)).coords,
+            })
+            .collect();
+        tracing::debug!(
+            end_ns = self.end_ns,
+            points_in = kept.points_in,
+            people_boxes = self.people.len(),
+            excluded_people = kept.excluded_boxes,
+            excluded_moving = kept.excluded_moving,
+            points_out = kept.points_out,
+            "rig window"
+        );
         let aligner = Aligner::new(&self.target, self.config)?;
         let guess = self.guess_world_t_lidar * self.lidar_pose.inverse() * frame;
         let report = aligner.align_with_rays(&source, &rays, &guess);
@@ -144,6 +174,7 @@ impl AlignJob {
         Ok(AlignOutcome {
             end_ns: self.end_ns,
             tracking: self.tracking,
+            window: kept,
             report,
             world_t_lidar,
             frame_t_lidar,
@@ -307,7 +338,9 @@ impl RigCore {
     }
 
     /// The next registration, when one is due after the newest scan and none is running.
-    pub fn next_job(&mut self) -> Option<AlignJob> {
+    /// `people_world` gives the people the robot sees now, in the world (asked only when a job
+    /// is due); once the rig is placed in the world, their points are left out of the window.
+    pub fn next_job(&mut self, people_world: impl FnOnce() -> Vec<OrientedBox>) -> Option<AlignJob> {
         if !self.wants_map() || self.map_raw_len <= self.cfg.min_map_points {
             return None;
         }
@@ -322,6 +355,7 @@ impl RigCore {
         // moved as the odometry says since; the yaw grid does the rest.
         let guess =
             self.world.world_pose(end_ns).ok().flatten().unwrap_or_else(|| self.hint_world_t_odom() * lidar_pose);
+        let people = if aligned { self.people_in_odometry(end_ns, &lidar_pose, &people_world()) } else { Vec::new() };
         self.attempts += 1;
         self.in_flight = true;
         self.next_align_ns = end_ns + if aligned { self.cfg.reregister_ns } else { self.cfg.retry_ns };
@@ -329,7 +363,8 @@ impl RigCore {
             end_ns,
             tracking: aligned,
             window_ns,
-            voxel_m: self.cfg.voxel_m,
+            window: self.cfg.window.clone(),
+            people,
             scans,
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
@@ -378,22 +413,47 @@ fn start_offset_m(
     (start.translation.vector - hint.translation.vector).norm()
 }
 
+impl RigCore {
+    /// `people_world` as exclusion boxes in the rig's odometry frame (none before the rig is
+    /// placed in the world).
+    fn people_in_odometry(
+        &self,
+        end_ns: u64,
+        odom_t_lidar: &Isometry3<f64>,
+        people_world: &[OrientedBox],
+    ) -> Vec<ExclusionBox> {
+        let Ok(Some(world_t_lidar)) = self.world.world_pose(end_ns) else { return Vec::new() };
+        let odom_t_world = odom_t_lidar * world_t_lidar.inverse();
+        // Both frames are gravity-aligned: between them a turn about the vertical.
+        let turn_rad = odom_t_world.rotation.euler_angles().2;
+        let grow = Vector3::new(2.0, 2.0, 2.0) * self.cfg.people_margin_m.max(0.0);
+        people_world
+            .iter()
+            .map(|b| ExclusionBox {
+                centre: (odom_t_world * Point3::from(b.centre_m)).coords,
+                size_m: b.size_m + grow,
+                yaw_rad: b.yaw_rad + turn_rad,
+            })
+            .collect()
+    }
+}
+
 /// Every this many window points is also kept as a ray (sensor to point): the free-space check
 /// walks a few hundred.
 const RAY_STRIDE: usize = 32;
 
-/// The rig's scans over `[end - window, end]`, in the frame at the rig's position at `end` with
-/// the odometry's (gravity-aligned) axes: the points, a sample of their rays, and that frame
-/// (in odometry).
+/// The rig's scans over `[end - window, end]` placed in the odometry frame, each point with its
+/// firing time (from the window's start); a sample of their rays (in the odometry frame too,
+/// with their times); and the window's frame (at the rig's position at `end`, with the
+/// odometry's gravity-aligned axes).
 fn window(
     scans: &[Arc<LioScan>],
     odom: &PoseBuffer,
     end_ns: u64,
     window_ns: u64,
-) -> (Vec<Vector3<f64>>, Vec<Ray>, Isometry3<f64>) {
+) -> (Vec<PlacedPoint>, Vec<(u32, Ray)>, Isometry3<f64>) {
     let Ok(at_end) = odom.at(end_ns) else { return (Vec::new(), Vec::new(), Isometry3::identity()) };
     let frame = Isometry3::from_parts(at_end.translation, UnitQuaternion::identity());
-    let inv = frame.inverse();
     let from = end_ns.saturating_sub(window_ns);
     let mut out = Vec::new();
     let mut rays = Vec::new();
@@ -404,11 +464,12 @@ fn window(
                 continue;
             }
             let Some(pose) = poses.at(p.t_ns) else { continue };
-            let q = inv * pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
+            let t_us = u32::try_from((p.t_ns - from) / 1000).unwrap_or(u32::MAX);
+            let q = pose * Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
             if out.len() % RAY_STRIDE == 0 {
-                rays.push(Ray { origin: (inv * pose).translation.vector, end: q.coords });
+                rays.push((t_us, Ray { origin: pose.translation.vector, end: q.coords }));
             }
-            out.push(q.coords);
+            out.push(PlacedPoint::new(u64::from(t_us), &q.coords));
         }
     }
     (out, rays, frame)
