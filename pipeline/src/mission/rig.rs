@@ -477,8 +477,32 @@ fn window(
 
 #[cfg(test)]
 mod tests {
-    use super::start_offset_m;
+    use super::{start_offset_m, RigCore, RigCoreConfig};
     use crate::align::pose_xyz_yaw;
+    use crate::ar::OrientedBox;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn people_are_carried_into_the_odometry_frame_once_the_rig_is_placed() {
+        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        let person =
+            OrientedBox { centre_m: Vector3::new(12.0, 3.0, 0.9), size_m: Vector3::new(0.5, 0.4, 1.8), yaw_rad: 0.3 };
+        let odom_t_lidar = pose_xyz_yaw(1.0, 0.0, 1.5, 0.0);
+        rig.world_mut().push_odometry(1_000, odom_t_lidar).unwrap();
+        rig.world_mut().push_odometry(2_000, odom_t_lidar).unwrap();
+        assert!(rig.people_in_odometry(2_000, &odom_t_lidar, &[person]).is_empty(), "not placed yet");
+        // The odometry frame sits at (10, 0) in the world, turned 90 deg.
+        let world_t_odom = pose_xyz_yaw(10.0, 0.0, 0.0, 90.0);
+        rig.world_mut().push_registration(2_000, world_t_odom * odom_t_lidar).unwrap();
+        let boxes = rig.people_in_odometry(2_000, &odom_t_lidar, &[person]);
+        assert_eq!(boxes.len(), 1);
+        let b = boxes[0];
+        // (12, 3) in the world is (2, 3) from the odometry's origin; turned back 90 deg: (3, -2).
+        assert!((b.centre - Vector3::new(3.0, -2.0, 0.9)).norm() < 1e-9, "{:?}", b.centre);
+        assert!((b.yaw_rad - (0.3 - std::f64::consts::FRAC_PI_2)).abs() < 1e-9);
+        assert!((b.size_m - Vector3::new(0.8, 0.7, 2.1)).norm() < 1e-9, "0.15 m more on every side");
+        assert!(b.contains(&Vector3::new(3.0, -2.0, 0.0)));
+    }
 
     #[test]
     fn the_start_gate_measures_where_the_rig_started_not_where_it_is() {
