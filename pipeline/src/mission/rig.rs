@@ -476,6 +476,7 @@ fn window(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::{start_offset_m, RigCore, RigCoreConfig};
     use crate::align::pose_xyz_yaw;
