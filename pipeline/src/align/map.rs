@@ -226,17 +226,37 @@ pub fn aggregate_window(
     c: &WindowConfig,
 ) -> (Vec<Vec3>, AggregateStats) {
     let t0 = points.iter().map(|(t, _)| *t).min().unwrap_or(0);
-    let placed: Vec<PlacedPoint> = points
+    // Kept in f64 here (a caller's points may sit exactly on voxel or slice boundaries).
+    let placed: Vec<(u32, Vec3)> = points
         .iter()
-        .filter_map(|(t, p)| Some(PlacedPoint::new((t - t0) / 1000, &(pose_at(*t)? * Point3::from(*p)).coords)))
+        .filter_map(|(t, p)| {
+            let t_us = u32::try_from((t - t0) / 1000).unwrap_or(u32::MAX);
+            Some((t_us, (pose_at(*t)? * Point3::from(*p)).coords))
+        })
         .collect();
     let (out, stats) = filter_window(&placed, &[], frame, boxes, c);
     (out, AggregateStats { points_in: points.len(), ..stats })
 }
 
-/// A window point placed in the odometry frame, kept small (a 10 s window holds millions): its
-/// time in microseconds from any start the caller picks (time differences are all that count),
-/// and where it is (f32: a window spans metres, not kilometres).
+/// A point of a window placed in the odometry frame: its time in microseconds from any start the
+/// caller picks (time differences are all that count) and where it is.
+pub trait Placed {
+    fn t_us(&self) -> u32;
+    fn xyz(&self) -> Vec3;
+}
+
+impl Placed for (u32, Vec3) {
+    fn t_us(&self) -> u32 {
+        self.0
+    }
+
+    fn xyz(&self) -> Vec3 {
+        self.1
+    }
+}
+
+/// A [`Placed`] point kept small (a rig's 10 s window holds millions): f32, as a window spans
+/// metres, not kilometres.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlacedPoint {
     pub t_us: u32,
@@ -247,8 +267,14 @@ impl PlacedPoint {
     pub fn new(t_us: u64, p: &Vec3) -> Self {
         Self { t_us: u32::try_from(t_us).unwrap_or(u32::MAX), xyz: [p.x as f32, p.y as f32, p.z as f32] }
     }
+}
 
-    pub fn xyz(&self) -> Vec3 {
+impl Placed for PlacedPoint {
+    fn t_us(&self) -> u32 {
+        self.t_us
+    }
+
+    fn xyz(&self) -> Vec3 {
         Vec3::new(f64::from(self.xyz[0]), f64::from(self.xyz[1]), f64::from(self.xyz[2]))
     }
 }
@@ -258,15 +284,15 @@ impl PlacedPoint {
 /// window's end) and reduced to `voxel_m`. Moving points are those in voxels the window's `rays`
 /// (with their firing times) saw through ([`seen_through`]) or, without rays, those of voxels
 /// seen in fewer than `min_slices` time slices. `boxes` and `rays` are in the odometry frame too.
-pub fn filter_window(
-    placed: &[PlacedPoint],
+pub fn filter_window<P: Placed>(
+    placed: &[P],
     rays: &[(u32, Ray)],
     frame: &Isometry3<f64>,
     boxes: &[ExclusionBox],
     c: &WindowConfig,
 ) -> (Vec<Vec3>, AggregateStats) {
     let mut stats = AggregateStats { points_in: placed.len(), ..AggregateStats::default() };
-    let (t0, t1) = placed.iter().fold((u32::MAX, 0), |(a, b), p| (a.min(p.t_us), b.max(p.t_us)));
+    let (t0, t1) = placed.iter().fold((u32::MAX, 0), |(a, b), p| (a.min(p.t_us()), b.max(p.t_us())));
     let span = u64::from(t1.saturating_sub(t0)).max(1);
     let carve = !rays.is_empty() && c.carve_min_rays > 0;
     let slices = if carve {
@@ -275,14 +301,14 @@ pub fn filter_window(
         c.slices.max(1)
     };
     let slice_of = |t: u32| ((u64::from(t.saturating_sub(t0)) * slices as u64 / (span + 1)) as usize).min(slices - 1);
-    let outside = |q: &Vec3| boxes.is_empty() || !boxes.iter().any(|b| b.contains(q));
+    let outside = |q: &Vec3| !boxes.iter().any(|b| b.contains(q));
     let inv = 1.0 / c.motion_voxel_m.max(1e-3);
     // Which slices saw a point in each voxel (a bit set: up to 64 slices).
     let mut seen: KeyMap<u64> = KeyMap::default();
     for p in placed {
         let q = p.xyz();
         if outside(&q) {
-            *seen.entry(key_of(&q, inv)).or_insert(0) |= 1u64 << slice_of(p.t_us).min(63);
+            *seen.entry(key_of(&q, inv)).or_insert(0) |= 1u64 << slice_of(p.t_us()).min(63);
         } else {
             stats.excluded_boxes += 1;
         }

@@ -32,7 +32,7 @@ pub use geometry::{
 };
 pub use map::{
     aggregate_window, filter_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig,
-    PlacedPoint, PreparedMap, WindowConfig,
+    Placed, PlacedPoint, PreparedMap, WindowConfig,
 };
 pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Probe, Seed};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};

@@ -73,9 +73,8 @@ fn window_drops_boxes_and_moving_points() {
     let (out, stats) = aggregate_window(&pts, |_| Some(Isometry3::identity()), &Isometry3::identity(), &[person], &c);
     assert_eq!(stats.points_in, 3000);
     assert_eq!(stats.excluded_boxes, 1000);
-    // The walker survives only where a voxel straddles a slice boundary (4 boundaries; its f32
-    // places put a few more of them across one).
-    assert!(stats.excluded_moving >= 750, "{stats:?}");
+    // The walker survives only where a voxel straddles a slice boundary (4 boundaries).
+    assert!(stats.excluded_moving >= 800, "{stats:?}");
     let off_wall = out.iter().filter(|p| (p.x - 5.0).abs() > 1e-9).count();
     assert!(off_wall <= 10, "{off_wall} points off the wall: {stats:?}");
     assert!(out.len() - off_wall >= 40, "the wall stays: {stats:?}");

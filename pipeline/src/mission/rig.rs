@@ -398,6 +398,29 @@ impl RigCore {
         self.accepted += 1;
         AlignVerdict::Accepted { first }
     }
+
+    /// `people_world` as exclusion boxes in the rig's odometry frame (none before the rig is
+    /// placed in the world).
+    fn people_in_odometry(
+        &self,
+        end_ns: u64,
+        odom_t_lidar: &Isometry3<f64>,
+        people_world: &[OrientedBox],
+    ) -> Vec<ExclusionBox> {
+        let Ok(Some(world_t_lidar)) = self.world.world_pose(end_ns) else { return Vec::new() };
+        let odom_t_world = odom_t_lidar * world_t_lidar.inverse();
+        // Both frames are gravity-aligned: between them a turn about the vertical.
+        let turn_rad = odom_t_world.rotation.euler_angles().2;
+        let grow = Vector3::repeat(2.0 * self.cfg.people_margin_m.max(0.0));
+        people_world
+            .iter()
+            .map(|b| ExclusionBox {
+                centre: (odom_t_world * Point3::from(b.centre_m)).coords,
+                size_m: b.size_m + grow,
+                yaw_rad: b.yaw_rad + turn_rad,
+            })
+            .collect()
+    }
 }
 
 /// How far from the expected start `hint` a registered pose `world_t_lidar` (the odometry's
@@ -411,31 +434,6 @@ fn start_offset_m(
 ) -> f64 {
     let start = world_t_lidar * odom_t_lidar.inverse() * first_pose;
     (start.translation.vector - hint.translation.vector).norm()
-}
-
-impl RigCore {
-    /// `people_world` as exclusion boxes in the rig's odometry frame (none before the rig is
-    /// placed in the world).
-    fn people_in_odometry(
-        &self,
-        end_ns: u64,
-        odom_t_lidar: &Isometry3<f64>,
-        people_world: &[OrientedBox],
-    ) -> Vec<ExclusionBox> {
-        let Ok(Some(world_t_lidar)) = self.world.world_pose(end_ns) else { return Vec::new() };
-        let odom_t_world = odom_t_lidar * world_t_lidar.inverse();
-        // Both frames are gravity-aligned: between them a turn about the vertical.
-        let turn_rad = odom_t_world.rotation.euler_angles().2;
-        let grow = Vector3::new(2.0, 2.0, 2.0) * self.cfg.people_margin_m.max(0.0);
-        people_world
-            .iter()
-            .map(|b| ExclusionBox {
-                centre: (odom_t_world * Point3::from(b.centre_m)).coords,
-                size_m: b.size_m + grow,
-                yaw_rad: b.yaw_rad + turn_rad,
-            })
-            .collect()
-    }
 }
 
 /// Every this many window points is also kept as a ray (sensor to point): the free-space check
