@@ -4,9 +4,9 @@
 //! against the see-through masks (the paper's inlier ratio). Writes `report.json` (stable keys,
 //! see docs/mission.md), `frames.csv` and the plots.
 
-use super::mission_truth::{self as truth, CameraFrame, CameraMount, PersonBox, Trajectory};
+use super::mission_truth::{self as truth, CameraFrame, CameraMount, PersonBox, PersonReturns, Trajectory};
 use anyhow::Context;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
@@ -24,6 +24,9 @@ pub struct Truth {
     pub people: Vec<PersonBox>,
     pub frames: Vec<CameraFrame>,
     pub mount: CameraMount,
+    /// Which people the robot's returns hit (`labels_robot.bin`); without it, a person's returns
+    /// are those of the window inside their box grown by 0.1 m, the floor and furniture included.
+    pub robot_returns: Option<PersonReturns>,
 }
 
 impl Truth {
@@ -41,6 +44,18 @@ impl Truth {
             frames: truth::read_frames(&dir.join("camera/frames.csv"))
                 .context("the mission scores camera frames: run `starc sim` without --no-camera")?,
             mount: truth::read_camera(&dir.join("extrinsics.json"))?,
+            robot_returns: {
+                let path = dir.join("labels_robot.bin");
+                if path.exists() {
+                    Some(PersonReturns::read(&path)?)
+                } else {
+                    tracing::warn!(
+                        "{}: no labels_robot.bin; a person counts as visible by the returns inside their box",
+                        dir.display()
+                    );
+                    None
+                }
+            },
         })
     }
 
@@ -178,26 +193,42 @@ fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
     q.euler_angles().2
 }
 
-/// The true people in the LIO world, with the window's returns inside each box.
-fn truth_in_world(people: &[PersonBox], lio_t_world: &Isometry3<f64>, points: &[WindowPoint]) -> Vec<TruthPerson> {
+/// The true people in the LIO world, each with the window's returns on them: from the simulator's
+/// labels where it wrote them (as the detect bench counts), else those inside their box grown by
+/// 0.1 m (`box_returns`, which also counts the floor and furniture around them).
+fn truth_in_world(
+    people: &[PersonBox],
+    lio_t_world: &Isometry3<f64>,
+    points: &[WindowPoint],
+    labelled: Option<&PersonReturns>,
+) -> Vec<TruthPerson> {
     let yaw = yaw_of(&lio_t_world.rotation);
+    let (from_ns, to_ns) = points.iter().fold((u64::MAX, 0), |(a, b), p| (a.min(p.t_ns), b.max(p.t_ns)));
     people
         .iter()
         .map(|p| {
             let centre = (lio_t_world * Point3::from(p.centre_m)).coords;
             let yaw_rad = p.yaw_rad + yaw;
-            let (s, c) = yaw_rad.sin_cos();
-            let returns = points
-                .iter()
-                .filter(|q| {
-                    let d = q.xyz() - centre;
-                    let local = [c * d.x + s * d.y, -s * d.x + c * d.y, d.z];
-                    (0..3).all(|i| local[i].abs() <= p.size_m[i] / 2.0 + 0.1)
-                })
-                .count();
+            let returns = match labelled {
+                Some(l) => l.on_person(p.label, from_ns, to_ns),
+                None => box_returns(&centre, &p.size_m, yaw_rad, points),
+            };
             TruthPerson { label: p.label, centre_m: centre, size_m: p.size_m, yaw_rad, returns }
         })
         .collect()
+}
+
+/// The window's returns inside a box grown by 0.1 m on every side.
+fn box_returns(centre: &Vector3<f64>, size_m: &Vector3<f64>, yaw_rad: f64, points: &[WindowPoint]) -> usize {
+    let (s, c) = yaw_rad.sin_cos();
+    points
+        .iter()
+        .filter(|q| {
+            let d = q.xyz() - centre;
+            let local = [c * d.x + s * d.y, -s * d.x + c * d.y, d.z];
+            (0..3).all(|i| local[i].abs() <= size_m[i] / 2.0 + 0.1)
+        })
+        .count()
 }
 
 /// Everything scored so far.
@@ -268,7 +299,12 @@ impl Scorer {
 
     pub fn detection(&mut self, d: &RobotDetection) {
         if let Some(l_t_w) = &self.lio_t_world {
-            let truth_people = truth_in_world(&truth::people_at(&self.truth.people, d.stamp_ns), l_t_w, &d.points);
+            let truth_people = truth_in_world(
+                &truth::people_at(&self.truth.people, d.stamp_ns),
+                l_t_w,
+                &d.points,
+                self.truth.robot_returns.as_ref(),
+            );
             let m = match_window(&d.found, &truth_people, &MatchRule::default());
             if tracing::enabled!(tracing::Level::DEBUG) {
                 let w_t_l = l_t_w.inverse();
@@ -276,6 +312,22 @@ impl Scorer {
                     if label.is_none() {
                         let at = w_t_l.transform_point(&det.centre_m.into());
                         tracing::debug!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "false positive (scenario frame)");
+                    }
+                }
+                let rule = MatchRule::default();
+                for t in truth_people.iter().filter(|t| t.returns < rule.min_returns) {
+                    let in_box = box_returns(&t.centre_m, &t.size_m, t.yaw_rad, &d.points);
+                    if in_box >= rule.min_returns {
+                        let at = w_t_l.transform_point(&t.centre_m.into());
+                        tracing::debug!(
+                            stamp_ns = d.stamp_ns,
+                            label = t.label,
+                            x_m = at.x,
+                            y_m = at.y,
+                            returns = t.returns,
+                            box_returns = in_box,
+                            "not visible: too few returns on them, though enough inside their box"
+                        );
                     }
                 }
                 for t in truth_people.iter().filter(|t| m.missed.contains(&t.label)) {
@@ -286,6 +338,7 @@ impl Scorer {
                         x_m = at.x,
                         y_m = at.y,
                         returns = t.returns,
+                        box_returns = box_returns(&t.centre_m, &t.size_m, t.yaw_rad, &d.points),
                         "missed (scenario frame)"
                     );
                 }
@@ -527,4 +580,33 @@ pub fn summary(r: &Report) -> String {
         r.memory.peak_rss_mib.unwrap_or(f64::NAN)
     );
     o
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn a_person_is_visible_by_the_returns_on_them_not_by_what_lies_in_their_box() {
+        let person = PersonBox {
+            t_ns: 0,
+            label: 1,
+            centre_m: Vector3::new(2.0, 0.0, 0.9),
+            size_m: Vector3::new(0.4, 0.5, 1.8),
+            yaw_rad: 0.0,
+        };
+        // 40 floor returns inside the box grown by 0.1 m, fired over [1000, 1039] ns.
+        let points: Vec<WindowPoint> = (0..40u64)
+            .map(|i| WindowPoint { x_m: 1.85 + 0.0075 * i as f32, y_m: 0.2, z_m: -0.05, t_ns: 1_000 + i })
+            .collect();
+        let by_box = truth_in_world(std::slice::from_ref(&person), &Isometry3::identity(), &points, None);
+        assert_eq!(by_box[0].returns, 40);
+        // The labels say none of them hit the person, and 5 of a packet in the window did.
+        let file = super::super::mission_truth::tests::labels_file(&[(999, &[1; 9]), (1_010, &[0, 1, 1, 1, 1, 1])]);
+        let labels = PersonReturns::read(file.path()).unwrap();
+        let by_label = truth_in_world(&[person], &Isometry3::identity(), &points, Some(&labels));
+        assert_eq!(by_label[0].returns, 5, "only the packet first fired inside the window counts");
+    }
 }

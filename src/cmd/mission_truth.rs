@@ -182,3 +182,92 @@ pub fn read_camera(path: &Path) -> anyhow::Result<CameraMount> {
     camera.validate().map_err(|e| anyhow::anyhow!("{}: camera: {e}", path.display()))?;
     Ok(CameraMount { camera, lidar_t_camera })
 }
+
+/// The simulator's per-return labels of the robot's Avia (`labels_robot.bin`), kept as the
+/// returns on each person per point packet: which people a detection window's returns hit.
+pub struct PersonReturns {
+    /// (PTP time of the packet's first firing, (person label, returns on them)), in time order.
+    packets: Vec<(u64, Vec<(u16, u32)>)>,
+}
+
+impl PersonReturns {
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let records = starc_hil::sim::truth::read_labels(&bytes)
+            .with_context(|| format!("{}: not a STARC labels file (version 1)", path.display()))?;
+        let mut packets: Vec<(u64, Vec<(u16, u32)>)> = records
+            .into_iter()
+            .map(|(t_ns, labels)| {
+                let mut on_people: Vec<(u16, u32)> = Vec::new();
+                for l in labels.into_iter().filter(|&l| l != 0 && l != starc_hil::sim::lidar::LABEL_EMPTY) {
+                    match on_people.iter_mut().find(|(k, _)| *k == l) {
+                        Some((_, n)) => *n += 1,
+                        None => on_people.push((l, 1)),
+                    }
+                }
+                (t_ns, on_people)
+            })
+            .collect();
+        packets.sort_by_key(|(t, _)| *t);
+        Ok(Self { packets })
+    }
+
+    /// The returns on person `label` of the packets first fired in `[from_ns, to_ns]` (a
+    /// window's edges are exact to one packet, under half a millisecond on an Avia).
+    pub fn on_person(&self, label: u16, from_ns: u64, to_ns: u64) -> usize {
+        let a = self.packets.partition_point(|(t, _)| *t < from_ns);
+        let b = self.packets.partition_point(|(t, _)| *t <= to_ns);
+        self.packets
+            .get(a..b)
+            .unwrap_or_default()
+            .iter()
+            .flat_map(|(_, people)| people.iter())
+            .filter(|(k, _)| *k == label)
+            .map(|(_, n)| *n as usize)
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// A labels file of (first firing ns, labels) packets, as `starc sim` writes it.
+    pub(crate) fn labels_file(packets: &[(u64, &[u16])]) -> tempfile::NamedTempFile {
+        let mut bytes = b"STARCLBL".to_vec();
+        bytes.extend_from_slice(&1u32.to_le_bytes());
+        for (t, labels) in packets {
+            bytes.extend_from_slice(&t.to_le_bytes());
+            bytes.extend_from_slice(&(labels.len() as u16).to_le_bytes());
+            for l in *labels {
+                bytes.extend_from_slice(&l.to_le_bytes());
+            }
+        }
+        let file = tempfile::NamedTempFile::new().unwrap();
+        std::fs::write(file.path(), bytes).unwrap();
+        file
+    }
+
+    #[test]
+    fn person_returns_count_the_labelled_returns_of_the_window_only() {
+        let empty = starc_hil::sim::lidar::LABEL_EMPTY;
+        // Out of order on purpose: the file is sorted on reading.
+        let file = labels_file(&[(300, &[2, 2, 0]), (100, &[1, 1, 0, empty, 2]), (200, &[0, 0, 1])]);
+        let r = PersonReturns::read(file.path()).unwrap();
+        assert_eq!(r.on_person(1, 100, 300), 3);
+        assert_eq!(r.on_person(2, 100, 300), 3);
+        assert_eq!(r.on_person(1, 150, 300), 1, "the packet first fired at 100 is before the window");
+        assert_eq!(r.on_person(2, 100, 299), 1, "nor is the one at 300 in a window ending at 299");
+        assert_eq!(r.on_person(3, 0, 1_000), 0, "nobody labelled 3");
+        assert_eq!(r.on_person(1, 300, 100), 0, "an empty window");
+    }
+
+    #[test]
+    fn a_bad_labels_file_is_an_error() {
+        let file = tempfile::NamedTempFile::new().unwrap();
+        std::fs::write(file.path(), b"STARCLBL\x01\x00\x00\x00\x05").unwrap();
+        assert!(PersonReturns::read(file.path()).is_err());
+        assert!(PersonReturns::read(Path::new("/nonexistent/labels_robot.bin")).is_err());
+    }
+}
