@@ -3,8 +3,11 @@
 //! in one table: inlier ratio, detection, alignment, the rig's pose error, latency and memory.
 //!
 //! Lab and corridor run 30 s, auditorium and tactical 60 s (their robot needs that long to reach
-//! anyone). Everything goes to `target/mission-bench/`. `STARC_MISSION_BENCH_SCENARIOS=lab` runs
-//! fewer. Latency figures depend on the machine's load: run it on a quiet machine.
+//! anyone). Everything goes to `target/mission-bench/` (`target/mission-bench/seed-N/` for a
+//! seed other than 1). `STARC_MISSION_BENCH_SCENARIOS=lab` runs fewer;
+//! `STARC_MISSION_BENCH_SEED=2` simulates every scenario with another seed of its noise (the
+//! scan pattern's phase, range noise, the IMU's noise and biases), to see which figures hold
+//! beyond one run. Latency figures depend on the machine's load: run it on a quiet machine.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -75,14 +78,25 @@ fn main() -> Result<(), String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let starc = PathBuf::from(env!("CARGO_BIN_EXE_starc"));
     let only = std::env::var("STARC_MISSION_BENCH_SCENARIOS").ok();
+    let seed: u64 = match std::env::var("STARC_MISSION_BENCH_SEED") {
+        Ok(s) => s.parse().map_err(|e| format!("STARC_MISSION_BENCH_SEED={s}: {e}"))?,
+        Err(_) => 1,
+    };
+    let base = if seed == 1 {
+        root.join("target/mission-bench")
+    } else {
+        root.join(format!("target/mission-bench/seed-{seed}"))
+    };
     let mut rows = Vec::new();
     for (s, seconds) in SCENARIOS {
         if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == s)) {
             continue;
         }
-        let dir = root.join("target/mission-bench").join(s);
-        eprintln!("{s}: simulating {seconds} s and running the mission live");
-        run(Command::new(&starc).args(["sim", s, "--duration", seconds, "--frames-every", "0", "--out"]).arg(&dir))?;
+        let dir = base.join(s);
+        eprintln!("{s}: simulating {seconds} s (seed {seed}) and running the mission live");
+        run(Command::new(&starc)
+            .args(["sim", s, "--duration", seconds, "--seed", &seed.to_string(), "--frames-every", "0", "--out"])
+            .arg(&dir))?;
         rows.push(row(s, &report(&dir.join("mission/report.json"))?));
         eprintln!("{s}: the mission offline on the same run");
         run(Command::new(&starc)
@@ -92,6 +106,7 @@ fn main() -> Result<(), String> {
             .arg(dir.join("offline")))?;
         rows.push(row(s, &report(&dir.join("offline/report.json"))?));
     }
+    println!("seed {seed}");
     println!(
         "| scenario | mode | inlier ratio (true pose) | precision / recall | first alignment | rig pose error p50 / p99 | L_SLAM p50 / p99 ms | L_comm | L_viz | total | memory |"
     );

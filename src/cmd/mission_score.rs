@@ -353,6 +353,10 @@ impl Scorer {
         self.attempts += 1;
         self.align_ms.push(total_ms);
         if !accepted {
+            if let Some(l_t_w) = self.lio_t_world.as_ref().filter(|_| total_ms.is_finite()) {
+                let (m, deg) = pose_error(world_t_lidar, &(l_t_w * truth::at(&self.truth.gt_fpv, end_ns)));
+                tracing::debug!(error_m = m, error_deg = deg, "rig alignment refused");
+            }
             return;
         }
         self.accepted += 1;
