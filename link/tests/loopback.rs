@@ -6,7 +6,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::{collect, free_port, rig_cfg, robot_cfg, wait_for, wait_up};
+use common::{collect, free_port, open_listening, rig_cfg, robot_cfg, wait_for, wait_up};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, LinkState, Received, Role};
 use starc_pipeline::align::{encode_tiles, TileMap, Vec3};
@@ -49,8 +49,7 @@ fn count(got: &[Received], f: impl Fn(&Received) -> bool) -> usize {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_kind_arrives_and_decodes() {
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await, "rig never saw the robot: {:?}", rig.health());
     assert!(wait_up(&robot, Duration::from_secs(5)).await, "robot never saw the rig: {:?}", robot.health());
@@ -99,8 +98,7 @@ async fn every_kind_arrives_and_decodes() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_late_rig_gets_the_whole_map() {
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let sent = tiles(1);
     assert_eq!(sent.len(), 3);
     for t in &sent {
@@ -131,8 +129,7 @@ async fn a_late_rig_gets_the_whole_map() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn wifi_loss_goes_stale_then_lost_and_resumes_with_the_map() {
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await);
     let before = tiles(1);
@@ -177,8 +174,7 @@ async fn wifi_loss_goes_stale_then_lost_and_resumes_with_the_map() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dropping_a_node_without_close_ends_its_session() {
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await);
     drop(robot);
@@ -206,9 +202,8 @@ async fn a_rig_started_first_waits_for_the_robot() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn damaged_messages_on_the_wire_are_counted_not_delivered() {
-    let port = free_port();
-    let rig_cfg = common::fast(vec![format!("tcp/127.0.0.1:{port}")], vec![]);
-    let mut rig = LinkNode::open(&rig_cfg, Role::Rig).await.unwrap();
+    let (mut rig, port) =
+        open_listening(|port| common::fast(vec![format!("tcp/127.0.0.1:{port}")], vec![]), Role::Rig).await;
     // A plain zenoh peer (no link node) puts garbage and a damaged frame on the robot's keys.
     let mut z = zenoh::Config::default();
     z.insert_json5("listen/endpoints", "[]").unwrap();

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use common::{free_port, robot_cfg, wait_up};
-use starc_link::{LinkMessage, LinkNode, Role};
+use common::{open_listening, robot_cfg, wait_up};
+use starc_link::{LinkMessage, Role};
 use starc_pipeline::link::decode;
 
 fn root() -> PathBuf {
@@ -43,8 +43,7 @@ impl Drop for Reap {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn python_zenoh_peer_reads_our_heartbeats_and_sends_its_own() {
     let Some(python) = python() else { return };
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let child = Command::new(python)
         .arg(root().join("tests/peers/zenoh_peer.py"))
         .args([port.to_string(), "10".into()])

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{collect, fast, free_port, rig_cfg, robot_cfg, wait_up};
+use common::{collect, fast, open_listening, rig_cfg, robot_cfg, wait_up};
 use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkState, Role, TlsConfig};
 
@@ -79,10 +79,10 @@ async fn tls_link_with_a_private_ca_and_a_stranger_refused() {
     let dir = tempfile::tempdir().unwrap();
     make_pki(dir.path(), "good");
     make_pki(dir.path(), "other");
-    let port = free_port();
-    let ep = format!("tls/127.0.0.1:{port}");
-    let robot =
-        LinkNode::open(&tls_cfg(dir.path(), vec![ep.clone()], vec![], "good", "good"), Role::Robot).await.unwrap();
+    let tls_ep = |port: u16| format!("tls/127.0.0.1:{port}");
+    let (robot, port) =
+        open_listening(|port| tls_cfg(dir.path(), vec![tls_ep(port)], vec![], "good", "good"), Role::Robot).await;
+    let ep = tls_ep(port);
 
     // A rig trusting another CA (and holding a certificate from it) never gets a link.
     let stranger =
@@ -118,8 +118,7 @@ async fn access_control_denies_one_key() {
     }"#;
     let path = dir.path().join("rig_zenoh.json5");
     std::fs::write(&path, acl).unwrap();
-    let port = free_port();
-    let robot = LinkNode::open(&robot_cfg(port), Role::Robot).await.unwrap();
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let mut rig = LinkNode::open(&LinkConfig { zenoh_config: Some(path), ..rig_cfg(port) }, Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
     let probe =

@@ -1,13 +1,47 @@
 //! Shared by the link tests: loopback-only configs with short timings, free ports, bounded waits.
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
-use starc_link::{LinkConfig, LinkNode, LinkState, Received};
+use starc_link::{LinkConfig, LinkNode, LinkState, Received, Role};
 
-/// A port free on 127.0.0.1 right now (the OS picks it; the small race is acceptable in tests).
+/// Ports handed out, counted across this test binary's threads.
+static NEXT_PORT: AtomicU32 = AtomicU32::new(0);
+
+/// A TCP port free on 127.0.0.1 right now, below the kernel's ephemeral range (32768 and up by
+/// default). A port the OS picks for a bind to port 0 comes from that range, where the outgoing
+/// connections of the tests running beside this one take their local ports too: one of them
+/// took such a port between this check and the node's own bind ("Address already in use").
+/// Each call tries the next port of a block chosen by the process id, so parallel tests of one
+/// binary never share one.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    const FIRST: u32 = 20_000;
+    const SPAN: u32 = 12_000;
+    let base = (std::process::id() % 600) * 20;
+    for _ in 0..SPAN {
+        let n = NEXT_PORT.fetch_add(1, Ordering::Relaxed);
+        let port = u16::try_from(FIRST + (base + n) % SPAN).unwrap();
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+    panic!("no free TCP port in {FIRST}..{}", FIRST + SPAN)
+}
+
+/// A node listening on a free port (`make` gives its config for a port), and that port. A port
+/// found free can still be refused by the time the node binds it (a socket of an earlier test
+/// lingering in TIME_WAIT, a neighbour's bind): then it tries the next one, five at most.
+pub async fn open_listening(make: impl Fn(u16) -> LinkConfig, role: Role) -> (LinkNode, u16) {
+    let mut last = None;
+    for _ in 0..5 {
+        let port = free_port();
+        match LinkNode::open(&make(port), role).await {
+            Ok(node) => return (node, port),
+            Err(e) => last = Some(e),
+        }
+    }
+    panic!("no listening {role:?} node on five free ports: {last:?}")
 }
 
 /// Short timings so loss and recovery take about a second; loopback endpoints only.
