@@ -305,7 +305,8 @@ impl Scorer {
                 &d.points,
                 self.truth.robot_returns.as_ref(),
             );
-            let m = match_window(&d.found, &truth_people, &MatchRule::default());
+            let rule = MatchRule::default();
+            let m = match_window(&d.found, &truth_people, &rule);
             if tracing::enabled!(tracing::Level::DEBUG) {
                 let w_t_l = l_t_w.inverse();
                 for (det, label) in d.found.iter().zip(&m.detection_label) {
@@ -314,23 +315,17 @@ impl Scorer {
                         tracing::debug!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "false positive (scenario frame)");
                     }
                 }
-                let rule = MatchRule::default();
-                for t in truth_people.iter().filter(|t| t.returns < rule.min_returns) {
+                // Each miss, and each person the box would have counted but their labels do not,
+                // with both counts.
+                for t in &truth_people {
                     let in_box = box_returns(&t.centre_m, &t.size_m, t.yaw_rad, &d.points);
-                    if in_box >= rule.min_returns {
-                        let at = w_t_l.transform_point(&t.centre_m.into());
-                        tracing::debug!(
-                            stamp_ns = d.stamp_ns,
-                            label = t.label,
-                            x_m = at.x,
-                            y_m = at.y,
-                            returns = t.returns,
-                            box_returns = in_box,
-                            "not visible: too few returns on them, though enough inside their box"
-                        );
-                    }
-                }
-                for t in truth_people.iter().filter(|t| m.missed.contains(&t.label)) {
+                    let what = if m.missed.contains(&t.label) {
+                        "missed (scenario frame)"
+                    } else if t.returns < rule.min_returns && in_box >= rule.min_returns {
+                        "not visible: too few returns on them, though enough inside their box"
+                    } else {
+                        continue;
+                    };
                     let at = w_t_l.transform_point(&t.centre_m.into());
                     tracing::debug!(
                         stamp_ns = d.stamp_ns,
@@ -338,8 +333,8 @@ impl Scorer {
                         x_m = at.x,
                         y_m = at.y,
                         returns = t.returns,
-                        box_returns = box_returns(&t.centre_m, &t.size_m, t.yaw_rad, &d.points),
-                        "missed (scenario frame)"
+                        box_returns = in_box,
+                        "{what}"
                     );
                 }
             }
