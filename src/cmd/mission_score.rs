@@ -6,7 +6,7 @@
 
 use super::mission_truth::{self as truth, CameraFrame, CameraMount, PersonBox, PersonReturns, Trajectory};
 use anyhow::Context;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use serde::Serialize;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
@@ -209,26 +209,19 @@ fn truth_in_world(
         .map(|p| {
             let centre = (lio_t_world * Point3::from(p.centre_m)).coords;
             let yaw_rad = p.yaw_rad + yaw;
-            let returns = match labelled {
+            let mut t = TruthPerson { label: p.label, centre_m: centre, size_m: p.size_m, yaw_rad, returns: 0 };
+            t.returns = match labelled {
                 Some(l) => l.on_person(p.label, from_ns, to_ns),
-                None => box_returns(&centre, &p.size_m, yaw_rad, points),
+                None => box_returns(&t, points),
             };
-            TruthPerson { label: p.label, centre_m: centre, size_m: p.size_m, yaw_rad, returns }
+            t
         })
         .collect()
 }
 
-/// The window's returns inside a box grown by 0.1 m on every side.
-fn box_returns(centre: &Vector3<f64>, size_m: &Vector3<f64>, yaw_rad: f64, points: &[WindowPoint]) -> usize {
-    let (s, c) = yaw_rad.sin_cos();
-    points
-        .iter()
-        .filter(|q| {
-            let d = q.xyz() - centre;
-            let local = [c * d.x + s * d.y, -s * d.x + c * d.y, d.z];
-            (0..3).all(|i| local[i].abs() <= size_m[i] / 2.0 + 0.1)
-        })
-        .count()
+/// The window's returns inside a person's box grown by 0.1 m on every side.
+fn box_returns(t: &TruthPerson, points: &[WindowPoint]) -> usize {
+    points.iter().filter(|q| t.contains(&q.xyz(), 0.1)).count()
 }
 
 /// Everything scored so far.
@@ -318,7 +311,7 @@ impl Scorer {
                 // Each miss, and each person the box would have counted but their labels do not,
                 // with both counts.
                 for t in &truth_people {
-                    let in_box = box_returns(&t.centre_m, &t.size_m, t.yaw_rad, &d.points);
+                    let in_box = box_returns(t, &d.points);
                     let what = if m.missed.contains(&t.label) {
                         "missed (scenario frame)"
                     } else if t.returns < rule.min_returns && in_box >= rule.min_returns {

@@ -235,14 +235,11 @@ pub(crate) mod tests {
 
     /// A labels file of (first firing ns, labels) packets, as `starc sim` writes it.
     pub(crate) fn labels_file(packets: &[(u64, &[u16])]) -> tempfile::NamedTempFile {
-        let mut bytes = b"STARCLBL".to_vec();
-        bytes.extend_from_slice(&1u32.to_le_bytes());
+        use starc_hil::sim::truth::{labels_record, LABELS_MAGIC, LABELS_VERSION};
+        let mut bytes = LABELS_MAGIC.to_vec();
+        bytes.extend_from_slice(&LABELS_VERSION.to_le_bytes());
         for (t, labels) in packets {
-            bytes.extend_from_slice(&t.to_le_bytes());
-            bytes.extend_from_slice(&(labels.len() as u16).to_le_bytes());
-            for l in *labels {
-                bytes.extend_from_slice(&l.to_le_bytes());
-            }
+            bytes.extend(labels_record(*t, labels).unwrap());
         }
         let file = tempfile::NamedTempFile::new().unwrap();
         std::fs::write(file.path(), bytes).unwrap();

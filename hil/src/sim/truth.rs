@@ -64,6 +64,18 @@ pub fn tum_line(time_ns: u64, pose: &Isometry3<f64>) -> String {
     )
 }
 
+/// One packet's record of the labels file (see [`LabelsWriter`]); `None` past 65535 returns.
+pub fn labels_record(first_ns: u64, labels: &[u16]) -> Option<Vec<u8>> {
+    let n = u16::try_from(labels.len()).ok()?;
+    let mut bytes = Vec::with_capacity(10 + labels.len() * 2);
+    bytes.extend_from_slice(&first_ns.to_le_bytes());
+    bytes.extend_from_slice(&n.to_le_bytes());
+    for l in labels {
+        bytes.extend_from_slice(&l.to_le_bytes());
+    }
+    Some(bytes)
+}
+
 /// Writes the labels file: `STARCLBL`, u32 version, then per point packet: u64 PTP time of the
 /// packet's first firing (as in its header), u16 returns, then that many u16 labels
 /// (0 building, k person k, 0xFFFF empty return). Little-endian.
@@ -83,13 +95,8 @@ impl LabelsWriter {
 
     pub fn write(&mut self, p: &PacketLabels) -> Result<()> {
         let t = p.first_ns.saturating_add_signed(self.ptp_offset_ns);
-        let n = u16::try_from(p.labels.len()).map_err(|_| out_err(self.file.path(), "packet of over 65535 returns"))?;
-        self.file.write(&t.to_le_bytes())?;
-        self.file.write(&n.to_le_bytes())?;
-        let mut bytes = Vec::with_capacity(p.labels.len() * 2);
-        for l in &p.labels {
-            bytes.extend_from_slice(&l.to_le_bytes());
-        }
+        let bytes =
+            labels_record(t, &p.labels).ok_or_else(|| out_err(self.file.path(), "packet of over 65535 returns"))?;
         self.file.write(&bytes)?;
         self.packets += 1;
         Ok(())

@@ -27,7 +27,8 @@ pub struct TruthPerson {
 }
 
 impl TruthPerson {
-    fn contains(&self, p: &Vector3<f64>, margin_m: f64) -> bool {
+    /// Whether `p` lies inside this person's box grown by `margin_m` on every side.
+    pub fn contains(&self, p: &Vector3<f64>, margin_m: f64) -> bool {
         let (s, c) = self.yaw_rad.sin_cos();
         let d = p - self.centre_m;
         let local = [c * d.x + s * d.y, -s * d.x + c * d.y, d.z];
