@@ -54,6 +54,17 @@ pub struct AlignConfig {
     /// not pinned down. A corridor placed metres off along itself, slightly turned, fits there
     /// at 4 cm RMS and looked constrained by its misfits (0.014 against 0.010 asked).
     pub degeneracy_residual_m: f64,
+    /// A result refused only for its degeneracy index is still accepted when what it explains
+    /// pins it down (a corridor held by its far end, see [`crate::align::PinnedCheck`]): at least
+    /// `pinned_min_inlier_ratio` of the source is within `inlier_distance_m` of the target (such a
+    /// result first has its weak directions settled by every correspondence), and moved along
+    /// each weak direction far enough that its points shift by each of `pinned_slides_m` (both
+    /// ways) it explains at least `pinned_min_lost` (a share of the source) and
+    /// `pinned_min_lost_points` fewer points. Empty: off (the index alone decides).
+    pub pinned_slides_m: Vec<f64>,
+    pub pinned_min_inlier_ratio: f64,
+    pub pinned_min_lost: f64,
+    pub pinned_min_lost_points: usize,
     /// Yaw-grid seed search: spacing of the yaw seeds around the circle (degrees); 0 disables the
     /// search (one attempt from the initial guess). The seeds are the guess turned about its own
     /// position by multiples of this step (the guess itself included).
@@ -146,6 +157,10 @@ impl Default for AlignConfig {
             max_update_norm: 1e-3,
             min_degeneracy_index: 0.01,
             degeneracy_residual_m: 0.05,
+            pinned_slides_m: vec![0.5, 1.0, 1.5, 2.0, 3.0],
+            pinned_min_inlier_ratio: 0.99,
+            pinned_min_lost: 0.005,
+            pinned_min_lost_points: 20,
             reseed_yaw_step_deg: 30.0,
             reseed_shift_m: 0.0,
             seed_source_voxel_m: 1.5,
@@ -254,6 +269,12 @@ impl AlignConfig {
             || !(0.0..=1.0).contains(&self.free_space_max_blocked)
         {
             return bad("free_space_step_m must be positive, the free-space margins not negative, free_space_max_blocked in [0, 1]");
+        }
+        if self.pinned_slides_m.iter().any(|d| !(d.is_finite() && *d > 0.0))
+            || !(0.0..=1.0).contains(&self.pinned_min_inlier_ratio)
+            || !(0.0..=1.0).contains(&self.pinned_min_lost)
+        {
+            return bad("pinned_slides_m must be positive, pinned_min_inlier_ratio and pinned_min_lost in [0, 1]");
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

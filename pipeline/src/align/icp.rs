@@ -71,6 +71,49 @@ fn correspondences(
     inliers
 }
 
+/// Source points with a target point within `within_m` once moved by `pose`.
+pub fn explained(target: &IcpTarget, source: &[Vec3], pose: &Isometry3<f64>, within_m: f64) -> usize {
+    source.iter().filter(|s| target.index.nearest(&(pose * Point3::from(**s)).coords, within_m).is_some()).count()
+}
+
+/// Moves `pose` along the unit translation `direction` (target frame) alone, to the least
+/// point-to-plane residual of every correspondence (no trimming, Huber weights). Trimmed ICP
+/// drops exactly the few pairs that pin a degenerate direction (a corridor's far end, off by a
+/// few decimetres, has the largest residuals), so it leaves such a direction where NDT put it.
+pub fn settle_along(
+    target: &IcpTarget,
+    source: &[Vec3],
+    pose: &Isometry3<f64>,
+    direction: &Vec3,
+    p: &IcpParams,
+) -> Isometry3<f64> {
+    let mut pose = *pose;
+    for _ in 0..p.max_iterations {
+        let (mut num, mut den) = (0.0, 0.0);
+        for s in source {
+            let q = (pose * Point3::from(*s)).coords;
+            let Some((i, _)) = target.index.nearest(&q, p.max_correspondence_m) else { continue };
+            let (Some(Some(n)), Some(t)) = (target.normals.get(i), target.index.points.get(i)) else { continue };
+            let r = n.dot(&(q - t));
+            let a = n.dot(direction);
+            let w = if r.abs() <= p.huber_m { 1.0 } else { p.huber_m / r.abs() };
+            num += w * r * a;
+            den += w * a * a;
+        }
+        if den.is_nan() || den <= 1e-9 {
+            break;
+        }
+        // At most half the correspondence distance a step, so pairs are found again.
+        let limit = 0.5 * p.max_correspondence_m;
+        let step = (-num / den).clamp(-limit, limit);
+        pose = nalgebra::Translation3::from(direction * step) * pose;
+        if step.abs() < p.converged_update {
+            break;
+        }
+    }
+    pose
+}
+
 /// Point-to-plane Jacobian row: d(nᵀ q)/dxi for q <- exp(xi) q.
 fn jacobian(q: &Vec3, n: &Vec3) -> Vector6<f64> {
     let a = q.cross(n);

@@ -34,7 +34,9 @@ pub use map::{
     aggregate_window, filter_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig,
     Placed, PlacedPoint, PreparedMap, WindowConfig,
 };
-pub use register::{yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, Probe, Seed};
+pub use register::{
+    yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, WeakDirection,
+};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]

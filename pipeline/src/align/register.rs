@@ -91,6 +91,35 @@ pub struct Attempt {
     /// The free-space check at the result (only for attempts that passed the other tests, and
     /// only when the source came with rays).
     pub free_space: Option<FreeSpace>,
+    /// The check of a result refused for its degeneracy index alone (`pinned_slides_m`).
+    pub pinned: Option<PinnedCheck>,
+}
+
+/// Whether what a degenerate result explains pins it down: the result is moved along each of
+/// its weak directions (eigenvectors of the information matrix below `min_degeneracy_index`),
+/// far enough that the source's points move `pinned_slides_m` on average, both ways and without
+/// refitting, and must explain clearly fewer of them every time. A bare corridor fits as well
+/// anywhere along itself; one whose far end is in view loses that end's points when slid. A turn
+/// about a long corridor's axis looks weak to the index only because the index scales turns by
+/// the points' spread along it.
+#[derive(Clone, Debug, Serialize)]
+pub struct PinnedCheck {
+    /// Reduced source points, and those with a target point within `inlier_distance_m`.
+    pub points: usize,
+    pub explained: usize,
+    pub directions: Vec<WeakDirection>,
+    pub pinned: bool,
+}
+
+/// One weak direction of a [`PinnedCheck`].
+#[derive(Clone, Debug, Serialize)]
+pub struct WeakDirection {
+    /// Its eigenvalue (as the degeneracy index).
+    pub eigenvalue: f64,
+    /// Share of the (unit) eigenvector that is translation; the rest is a turn.
+    pub translation_share: f64,
+    /// Each move (mean point displacement, m, signed) and the points explained there.
+    pub moves: Vec<(f64, usize)>,
 }
 
 /// ICP re-run from a start perturbed off an attempt's result (the consistency check).
@@ -512,8 +541,18 @@ impl Aligner {
         let t1 = Instant::now();
         let params = self.icp_params();
         let mut r = icp::refine(&self.icp_target, src.icp, pose, &params);
+        // A degenerate result that explains (nearly) the whole source, so that no misfit drags
+        // it, has its weak directions settled by every pair before it is judged.
+        let settle = !at_most(c.min_degeneracy_index, r.degeneracy_index)
+            && at_most(c.pinned_min_inlier_ratio, r.inlier_ratio)
+            && !c.pinned_slides_m.is_empty();
+        if settle {
+            if let Some(settled) = self.settle_weak(&r, src.icp, &params) {
+                r = icp::refine(&self.icp_target, src.icp, settled, &params);
+            }
+        }
         let icp_ms = ms_since(t1);
-        let mut rejected_because = self.rejections(&metrics_of(&r));
+        let (mut rejected_because, mut pinned) = self.judge(&r, src.icp);
         // Consistency check: from starts around the result, ICP must not settle elsewhere with a
         // clearly lower residual (a neighbouring minimum passes every other test: 9.7 cm off in
         // the office grid). When one does, ICP continues from there (at most `verify_hops` times).
@@ -549,7 +588,7 @@ impl Aligner {
                 }
                 verify_hops += 1;
                 r = icp::refine(&self.icp_target, src.icp, better.pose, &params);
-                rejected_because = self.rejections(&metrics_of(&r));
+                (rejected_because, pinned) = self.judge(&r, src.icp);
                 if !rejected_because.is_empty() {
                     break;
                 }
@@ -585,7 +624,105 @@ impl Aligner {
             alternatives: Vec::new(),
             ambiguous: false,
             free_space,
+            pinned,
         }
+    }
+
+    /// The acceptance tests of an ICP result; one refused for its degeneracy index alone gets
+    /// the check of [`PinnedCheck`], and passes when it is pinned.
+    fn judge(&self, r: &icp::IcpResult, source: &[Vec3]) -> (Vec<String>, Option<PinnedCheck>) {
+        let c = &self.config;
+        let m = metrics_of(r);
+        let mut why = self.rejections(&m);
+        let degenerate_only = why.len() == 1 && !at_most(c.min_degeneracy_index, m.degeneracy_index);
+        if !degenerate_only || c.pinned_slides_m.is_empty() {
+            return (why, None);
+        }
+        let check = self.pinned_check(r, source);
+        if check.pinned {
+            why.clear();
+            return (why, Some(check));
+        }
+        let share = check.explained as f64 / check.points.max(1) as f64;
+        // The move that lost the fewest points, in the direction it was made along.
+        let closest = check
+            .directions
+            .iter()
+            .flat_map(|d| d.moves.iter().map(move |m| (d.translation_share, *m)))
+            .max_by_key(|(_, (_, n))| *n);
+        why.push(match closest {
+            None => format!("not pinned: explains {share:.3} of the source ({} asked)", c.pinned_min_inlier_ratio),
+            Some((translation_share, (move_m, n))) => format!(
+                "not pinned: moved {move_m:+.1} m along a weak direction (translation share {translation_share:.2}) it still explains {n} of the {} points it explains",
+                check.explained
+            ),
+        });
+        (why, Some(check))
+    }
+
+    /// A degenerate result's weak directions that are mostly translation, each settled by every
+    /// correspondence ([`icp::settle_along`]); `None` when it has none.
+    fn settle_weak(&self, r: &icp::IcpResult, source: &[Vec3], params: &IcpParams) -> Option<Isometry3<f64>> {
+        let eigen = nalgebra::SymmetricEigen::new(r.information);
+        let mut pose = None;
+        for (k, &eigenvalue) in eigen.eigenvalues.iter().enumerate() {
+            let v = eigen.eigenvectors.column(k);
+            let slide = Vec3::new(v[3], v[4], v[5]);
+            if at_most(self.config.min_degeneracy_index, eigenvalue) || slide.norm() < 0.9 {
+                continue;
+            }
+            let from = pose.unwrap_or(r.pose);
+            pose = Some(icp::settle_along(&self.icp_target, source, &from, &slide.normalize(), params));
+        }
+        pose
+    }
+
+    fn pinned_check(&self, r: &icp::IcpResult, source: &[Vec3]) -> PinnedCheck {
+        let c = &self.config;
+        let points = source.len();
+        let explained = icp::explained(&self.icp_target, source, &r.pose, c.inlier_distance_m);
+        let mut check = PinnedCheck { points, explained, directions: Vec::new(), pinned: false };
+        // A result that leaves part of the source unexplained may be held by its misfits.
+        if points == 0 || (explained as f64) < c.pinned_min_inlier_ratio * points as f64 {
+            return check;
+        }
+        let need = ((c.pinned_min_lost * points as f64).ceil() as usize).max(c.pinned_min_lost_points);
+        let moved: Vec<Vec3> = source.iter().map(|s| (r.pose * nalgebra::Point3::from(*s)).coords).collect();
+        let centre = r.info_centre;
+        let radius = r.info_radius_m.max(1e-6);
+        let eigen = nalgebra::SymmetricEigen::new(r.information);
+        for (k, &eigenvalue) in eigen.eigenvalues.iter().enumerate() {
+            if at_most(c.min_degeneracy_index, eigenvalue) {
+                continue;
+            }
+            let v = eigen.eigenvectors.column(k);
+            // The information matrix's turns are about `centre`, scaled by `radius`.
+            let turn = Vec3::new(v[0], v[1], v[2]) / radius;
+            let slide = Vec3::new(v[3], v[4], v[5]);
+            let unit_rms = (moved.iter().map(|q| (turn.cross(&(q - centre)) + slide).norm_squared()).sum::<f64>()
+                / points as f64)
+                .sqrt();
+            if unit_rms.is_nan() || unit_rms <= 0.0 {
+                continue;
+            }
+            let mut moves = Vec::with_capacity(2 * c.pinned_slides_m.len());
+            for &d in &c.pinned_slides_m {
+                for signed in [d, -d] {
+                    let e = signed / unit_rms;
+                    let rot = UnitQuaternion::from_scaled_axis(turn * e);
+                    let shift = centre - rot * centre + slide * e;
+                    let step = Isometry3::from_parts(nalgebra::Translation3::from(shift), rot);
+                    moves.push((
+                        signed,
+                        icp::explained(&self.icp_target, source, &(step * r.pose), c.inlier_distance_m),
+                    ));
+                }
+            }
+            check.directions.push(WeakDirection { eigenvalue, translation_share: slide.norm(), moves });
+        }
+        check.pinned = !check.directions.is_empty()
+            && check.directions.iter().flat_map(|d| &d.moves).all(|&(_, n)| explained.saturating_sub(n) >= need);
+        check
     }
 
     /// ICP on the thinned `source` from starts perturbed off `pose`: ±`verify_shift_m` along x

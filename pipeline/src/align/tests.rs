@@ -259,6 +259,10 @@ fn config_defaults_and_example_load() {
     assert!(AlignConfig::from_toml("verify_max_points = 0\n").is_err());
     assert!(AlignConfig::from_toml("free_space_max_blocked = 1.5\n").is_err());
     assert!(AlignConfig::from_toml("free_space_step_m = 0\n").is_err());
+    assert!(AlignConfig::from_toml("pinned_slides_m = [0.5, -1.0]\n").is_err());
+    assert!(AlignConfig::from_toml("pinned_min_inlier_ratio = 1.5\n").is_err());
+    assert!(AlignConfig::from_toml("pinned_min_lost = -0.1\n").is_err());
+    assert_eq!(AlignConfig::from_toml("pinned_slides_m = []\n").unwrap().pinned_slides_m, Vec::<f64>::new());
     assert!(AlignConfig::from_toml("free_space_end_margin_m = -0.1\n").is_err());
 }
 
@@ -330,4 +334,66 @@ fn the_free_space_check_rejects_rays_that_pass_through_the_map() {
     assert!(a.free_space.as_ref().unwrap().blocked_ratio > 0.5);
     // No rays: no check, as `align` does.
     assert!(aligner.align(&source, &Isometry3::identity()).best().unwrap().free_space.is_none());
+}
+
+/// A 60 m corridor along x, 2.4 m wide and 2.7 m high, sampled every 10 cm; with its far end
+/// wall (x = 60) when `far_end`.
+fn corridor(far_end: bool) -> Vec<Vec3> {
+    let grid = |n: i32| (0..=n).map(|k| f64::from(k) * 0.1);
+    let mut points = Vec::new();
+    for x in grid(600) {
+        for z in grid(27) {
+            points.push(Vec3::new(x, 0.0, z));
+            points.push(Vec3::new(x, 2.4, z));
+        }
+        for y in grid(24) {
+            points.push(Vec3::new(x, y, 0.0));
+            points.push(Vec3::new(x, y, 2.7));
+        }
+    }
+    if far_end {
+        for y in grid(24) {
+            for z in grid(27) {
+                points.push(Vec3::new(60.0, y, z));
+            }
+        }
+    }
+    points
+}
+
+#[test]
+fn a_corridor_is_pinned_by_its_far_end_and_not_without_it() {
+    // The rig stands 10 m into the corridor looking down it: it sees the walls ahead of it and,
+    // with it, the far end wall; the guess is 0.3 m off along the corridor, where trimmed ICP
+    // alone leaves it (the end wall's pairs are the ones it trims).
+    let truth =
+        Isometry3::from_parts(Translation3::new(10.0, 1.2, 1.5), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01));
+    let guess = Isometry3::from_parts(Translation3::new(0.3, 0.0, 0.0), UnitQuaternion::identity()) * truth;
+    let config = AlignConfig { reseed_yaw_step_deg: 0.0, ..AlignConfig::default() };
+    let seen = |far_end: bool| -> Vec<Vec3> {
+        let inv = truth.inverse();
+        corridor(far_end).into_iter().filter(|p| p.x > 10.5).map(|p| (inv * Point3::from(p)).coords).collect()
+    };
+    for far_end in [true, false] {
+        let target = corridor(far_end);
+        let source = seen(far_end);
+        let report = Aligner::new(&target, config.clone()).unwrap().align(&source, &guess);
+        let best = report.best().unwrap();
+        // Either way the index calls the corridor degenerate: the check decides.
+        assert!(best.metrics.degeneracy_index < config.min_degeneracy_index, "{}", best.metrics.degeneracy_index);
+        let check = best.pinned.as_ref().expect("the check ran");
+        assert!(!check.directions.is_empty());
+        if far_end {
+            assert_close(&report, &truth, "corridor with its far end");
+            assert!(check.pinned, "{check:?}");
+        } else {
+            assert!(!report.accepted && !check.pinned, "{check:?}");
+            let failure = report.failure.as_deref().unwrap_or_default();
+            assert!(failure.contains("not pinned"), "{failure}");
+        }
+    }
+    // With the check off the index alone refuses even the corridor with its end.
+    let off = AlignConfig { pinned_slides_m: Vec::new(), ..config };
+    let report = Aligner::new(&corridor(true), off).unwrap().align(&seen(true), &guess);
+    assert!(!report.accepted && report.best().unwrap().pinned.is_none());
 }

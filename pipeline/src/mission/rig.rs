@@ -53,9 +53,10 @@ impl Default for RigCoreConfig {
             lio: LioConfig::default(),
             align: AlignConfig::default(),
             // A re-registration must be well conditioned: a borderline one (a corridor's axis)
-            // moves a good odometry pose more than it corrects it.
+            // moves a good odometry pose more than it corrects it, so the index alone decides.
             track: AlignConfig {
                 min_degeneracy_index: 0.02,
+                pinned_slides_m: Vec::new(),
                 reseed_yaw_step_deg: 0.0,
                 ndt_resolutions_m: vec![2.0, 1.0],
                 seed_levels: 1,
