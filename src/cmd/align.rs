@@ -109,6 +109,18 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
                 f.blocked_ratio * 100.0
             )?;
         }
+        if let Some(p) = a.pinned.as_ref().filter(|p| p.pinned) {
+            // Accepted below the degeneracy index: say what held it, so nobody is surprised.
+            let fewest = p.directions.iter().flat_map(|d| &d.moves).map(|m| p.explained.saturating_sub(m.1)).min();
+            writeln!(
+                out,
+                "pinned by what it explains: {} of {} points; moved along its {} weak direction(s) it loses at least {} of them",
+                p.explained,
+                p.points,
+                p.directions.len(),
+                fewest.unwrap_or(0)
+            )?;
+        }
         if !a.rejected_because.is_empty() {
             writeln!(out, "rejected because: {}", a.rejected_because.join("; "))?;
         }
