@@ -37,7 +37,11 @@ pub async fn run(
     mut stop: Stop,
     watch: Option<mpsc::UnboundedSender<RobotEvent>>,
 ) -> anyhow::Result<RobotSummary> {
-    let core_cfg = RobotCoreConfig { lio: lio_config(cfg.lio.as_deref())?, ..RobotCoreConfig::default() };
+    let lio = match cfg.lio.as_deref() {
+        Some(path) => lio_config(Some(path))?,
+        None => RobotCoreConfig::robot_lio(),
+    };
+    let core_cfg = RobotCoreConfig { lio, ..RobotCoreConfig::default() };
     let map = RobotMap::new(core_cfg.map_config())?;
     let mut core = RobotCore::new(core_cfg)?;
     let period = Duration::from_millis(cfg.map_period_ms.max(10));
