@@ -177,6 +177,10 @@ pub struct Aligner {
     pub prepare_ms: f64,
 }
 
+/// Only weak directions at least this much translation are settled: a weak turn (about a long
+/// corridor's axis) is left to ICP.
+const SETTLE_MIN_TRANSLATION_SHARE: f64 = 0.9;
+
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -668,7 +672,7 @@ impl Aligner {
         for (k, &eigenvalue) in eigen.eigenvalues.iter().enumerate() {
             let v = eigen.eigenvectors.column(k);
             let slide = Vec3::new(v[3], v[4], v[5]);
-            if at_most(self.config.min_degeneracy_index, eigenvalue) || slide.norm() < 0.9 {
+            if at_most(self.config.min_degeneracy_index, eigenvalue) || slide.norm() < SETTLE_MIN_TRANSLATION_SHARE {
                 continue;
             }
             let from = pose.unwrap_or(r.pose);
