@@ -88,16 +88,15 @@ pub fn settle_along(
     p: &IcpParams,
 ) -> Isometry3<f64> {
     let mut pose = *pose;
+    let every = IcpParams { trim_ratio: 1.0, ..*p };
+    let mut pairs = Vec::with_capacity(source.len());
     for _ in 0..p.max_iterations {
+        correspondences(target, source, &pose, &every, &mut pairs);
         let (mut num, mut den) = (0.0, 0.0);
-        for s in source {
-            let q = (pose * Point3::from(*s)).coords;
-            let Some((i, _)) = target.index.nearest(&q, p.max_correspondence_m) else { continue };
-            let (Some(Some(n)), Some(t)) = (target.normals.get(i), target.index.points.get(i)) else { continue };
-            let r = n.dot(&(q - t));
-            let a = n.dot(direction);
-            let w = if r.abs() <= p.huber_m { 1.0 } else { p.huber_m / r.abs() };
-            num += w * r * a;
+        for pair in &pairs {
+            let a = pair.n.dot(direction);
+            let w = huber_weight(pair.r, p.huber_m);
+            num += w * pair.r * a;
             den += w * a * a;
         }
         if den.is_nan() || den <= 1e-9 {
@@ -112,6 +111,15 @@ pub fn settle_along(
         }
     }
     pose
+}
+
+/// The Huber loss's weight of a residual (1 within `huber_m`, falling as 1/|r| beyond).
+fn huber_weight(r: f64, huber_m: f64) -> f64 {
+    if r.abs() <= huber_m {
+        1.0
+    } else {
+        huber_m / r.abs()
+    }
 }
 
 /// Point-to-plane Jacobian row: d(nᵀ q)/dxi for q <- exp(xi) q.
@@ -135,7 +143,7 @@ pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &Icp
         let mut g = Vector6::zeros();
         for pair in &pairs {
             let j = jacobian(&pair.q, &pair.n);
-            let w = if pair.r.abs() <= p.huber_m { 1.0 } else { p.huber_m / pair.r.abs() };
+            let w = huber_weight(pair.r, p.huber_m);
             h += w * j * j.transpose();
             g += w * pair.r * j;
         }

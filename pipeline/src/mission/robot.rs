@@ -34,13 +34,6 @@ pub struct RobotCoreConfig {
     pub person_radius_m: f64,
 }
 
-impl RobotCoreConfig {
-    /// The map's part of the config.
-    pub fn map_config(&self) -> RobotMapConfig {
-        RobotMapConfig { voxel_m: self.map_voxel_m, tile_edge_m: self.tile_edge_m, tile_step_m: self.tile_step_m }
-    }
-}
-
 /// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
 /// wheeled base on a floor turns smoothly, so its attitude is left to its gyro between scans far
 /// more than a walker's helmet can be (the LIO's generic 0.1 lets a scan that sees little but new
@@ -54,6 +47,11 @@ impl RobotCoreConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             ..LioConfig::default()
         }
+    }
+
+    /// The map's part of the config.
+    pub fn map_config(&self) -> RobotMapConfig {
+        RobotMapConfig { voxel_m: self.map_voxel_m, tile_edge_m: self.tile_edge_m, tile_step_m: self.tile_step_m }
     }
 }
 
