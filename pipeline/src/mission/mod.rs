@@ -7,6 +7,7 @@
 //! - [`render_view`]: the responder's frame at a time, from the three.
 
 mod overlay;
+mod person_motion;
 mod place;
 mod rig;
 mod robot;

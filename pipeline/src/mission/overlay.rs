@@ -5,6 +5,7 @@
 //! A person seen moving is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
 //! they were last seen, their points no longer show where they are.
 
+use super::person_motion;
 use crate::ar::{ArPerson, OrientedBox};
 use nalgebra::Vector3;
 use std::collections::VecDeque;
@@ -61,8 +62,15 @@ impl Overlay {
         for s in self.shown.iter().rev().filter(|s| s.stamp_ns <= t_ns && s.stamp_ns + self.hold_ns >= t_ns) {
             for p in &s.people {
                 let Some(b) = p.bbox else { continue };
-                let seen = out.iter().filter_map(|q| q.bbox).any(|c| same_person(&c.centre_m, &b.centre_m))
-                    || dropped.iter().any(|c| same_person(c, &b.centre_m));
+                // Someone already drawn or dropped at a later sighting: the newest one nearby, or
+                // theirs followed window by window (a walker is by then further away than one
+                // person's sightings are apart, and would be drawn twice).
+                let latest = self.latest_sighting(s.stamp_ns, &b.centre_m, t_ns);
+                let seen = out
+                    .iter()
+                    .filter_map(|q| q.bbox)
+                    .any(|c| same_person(&c.centre_m, &b.centre_m) || same_person(&c.centre_m, &latest))
+                    || dropped.iter().any(|c| same_person(c, &b.centre_m) || same_person(c, &latest));
                 // Confirmed by an earlier sighting in the `CONFIRM_NS` before this one.
                 if seen || self.earlier_sighting(s.stamp_ns, 1, &b.centre_m).is_none() {
                     continue;
@@ -93,6 +101,19 @@ impl Overlay {
                 let b = s.people.iter().filter_map(|p| p.bbox).find(|b| same_person(&b.centre_m, centre))?;
                 Some((s.stamp_ns, b.centre_m))
             })
+    }
+
+    /// Where the person seen at `centre` at `stamp_ns` was last seen by `t_ns`, followed window
+    /// by window (`centre` itself when they were not seen again).
+    fn latest_sighting(&self, stamp_ns: u64, centre: &Vector3<f64>, t_ns: u64) -> Vector3<f64> {
+        let mut last = (stamp_ns, centre.xy());
+        for s in self.shown.iter().filter(|s| s.stamp_ns > stamp_ns && s.stamp_ns <= t_ns) {
+            let centres: Vec<Vector3<f64>> = s.people.iter().filter_map(|p| p.bbox).map(|b| b.centre_m).collect();
+            if let Some(c) = person_motion::same_person(last, s.stamp_ns, centres.iter()) {
+                last = (s.stamp_ns, c);
+            }
+        }
+        Vector3::new(last.1.x, last.1.y, centre.z)
     }
 
     /// Floor speed of the person seen at `centre` at `stamp_ns`, over at least
@@ -171,6 +192,30 @@ mod tests {
         o.push(1_450 * MS, vec![person(5.0)]);
         assert_eq!(walker(&o, 1_450), 0, "their speed outlives the sightings it was measured on");
         assert_eq!(o.at(1_400 * MS).len(), 1, "the standing person is held for the whole second");
+    }
+
+    #[test]
+    fn a_walker_seen_a_second_ago_is_not_drawn_again_where_they_were() {
+        const MS: u64 = 1_000_000;
+        let mut o = Overlay::new(1_000 * MS);
+        // Walking at 0.7 m/s, seen every 100 ms: their first sightings are 0.7 m behind them
+        // a second later, as far as two people's sightings are apart.
+        for k in 0..=10u32 {
+            o.push(u64::from(k) * 100 * MS, vec![person(0.07 * f64::from(k))]);
+        }
+        let drawn = o.at(1_000 * MS);
+        assert_eq!(drawn.len(), 1, "{drawn:?}");
+        assert_eq!(drawn[0].age_ns, 0);
+        // Someone else standing 1 m away, seen only until 500 ms, is still held.
+        let mut o = Overlay::new(1_000 * MS);
+        for k in 0..=10u32 {
+            let mut people = vec![person(0.07 * f64::from(k))];
+            if k <= 5 {
+                people.push(person(-1.0));
+            }
+            o.push(u64::from(k) * 100 * MS, people);
+        }
+        assert_eq!(o.at(1_000 * MS).len(), 2);
     }
 
     #[test]

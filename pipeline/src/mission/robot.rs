@@ -2,10 +2,13 @@
 //! of every scan, person detections over a short window of placed scans, and the map the rig
 //! aligns to (kept as one point per voxel, handed out as changed map tiles) out.
 
+use super::person_motion::PersonMotion;
 use super::place::ScanPlacer;
 use super::robot_map::{RobotMap, RobotMapConfig};
 use crate::ar::{ArPerson, OrientedBox};
-use crate::detect::{DetectConfig, DetectWindow, Detection, Detector, GeometricDetector, WindowPoint};
+use crate::detect::{
+    DetectConfig, DetectWindow, Detection, Detector, FloorModel, GeometricDetector, PersonPose, WindowPoint,
+};
 use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::PipelineError;
 use nalgebra::Vector3;
@@ -32,6 +35,15 @@ pub struct RobotCoreConfig {
     /// Only a person's points this close (in the floor plane) to the median of their points are
     /// drawn: what the cluster took from a chair or a wall beside them is not (0: all).
     pub person_radius_m: f64,
+    /// An upright person walking at least `walker_speed_mps` (fitted to their detections of the
+    /// last `motion_span_ns`, over at least `motion_min_baseline_ns`) is drawn without their
+    /// returns lower than `walker_min_height_m` above the floor: a walker's lower legs swing at
+    /// two to three times their pace, so where the scan saw them is not where they are (0: all
+    /// drawn).
+    pub walker_speed_mps: f64,
+    pub walker_min_height_m: f64,
+    pub motion_span_ns: u64,
+    pub motion_min_baseline_ns: u64,
 }
 
 /// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
@@ -66,6 +78,10 @@ impl Default for RobotCoreConfig {
             tile_edge_m: 4.0,
             tile_step_m: 0.01,
             person_radius_m: 0.25,
+            walker_speed_mps: 0.3,
+            walker_min_height_m: 0.4,
+            motion_span_ns: 500_000_000,
+            motion_min_baseline_ns: 200_000_000,
         }
     }
 }
@@ -102,6 +118,7 @@ pub struct RobotCore {
     /// to grow its own map elsewhere: [`Self::take_unmapped`]).
     unmapped: Vec<Arc<Vec<WindowPoint>>>,
     map: RobotMap,
+    motion: PersonMotion,
     outs: Vec<ScanOutput>,
 }
 
@@ -120,6 +137,7 @@ impl RobotCore {
             window: VecDeque::new(),
             unmapped: Vec::new(),
             map: RobotMap::new(cfg.map_config())?,
+            motion: PersonMotion::new(cfg.motion_span_ns, cfg.motion_min_baseline_ns),
             outs: Vec::new(),
             cfg,
         })
@@ -172,21 +190,27 @@ impl RobotCore {
         self.detector.detect(&w, &mut found);
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let fresh_from = o.end_ns.saturating_sub(self.cfg.fresh_points_ns);
+        let floor = self.detector.last_floor();
         let people = found
             .iter()
-            .map(|det| ArPerson {
-                points_world: core_points(
-                    det.point_indices
-                        .iter()
-                        .filter_map(|&i| points.get(i as usize))
-                        .filter(|p| p.t_ns >= fresh_from)
-                        .map(WindowPoint::xyz),
-                    self.cfg.person_radius_m,
-                ),
-                bbox: Some(OrientedBox { centre_m: det.centre_m, size_m: det.size_m, yaw_rad: det.yaw_rad }),
-                age_ns: 0,
+            .map(|det| {
+                let fresh =
+                    det.point_indices.iter().filter_map(|&i| points.get(i as usize)).filter(|p| p.t_ns >= fresh_from);
+                let walking = det.pose == PersonPose::Upright
+                    && self.cfg.walker_min_height_m > 0.0
+                    && self.motion.velocity(o.end_ns, &det.centre_m).norm() >= self.cfg.walker_speed_mps;
+                let min_height_m = if walking { self.cfg.walker_min_height_m } else { f64::MIN };
+                ArPerson {
+                    points_world: core_points(
+                        above_floor(fresh, floor.as_ref(), min_height_m),
+                        self.cfg.person_radius_m,
+                    ),
+                    bbox: Some(OrientedBox { centre_m: det.centre_m, size_m: det.size_m, yaw_rad: det.yaw_rad }),
+                    age_ns: 0,
+                }
             })
             .collect();
+        self.motion.push(o.end_ns, found.iter().map(|d| d.centre_m).collect());
         let scores = found.iter().map(|d| d.score).collect();
         RobotDetection { stamp_ns: o.end_ns, people, scores, found, points, detect_ms }
     }
@@ -209,9 +233,22 @@ impl RobotCore {
     }
 }
 
+/// The points at least `min_height_m` above the floor, or all of them when none is (a person
+/// seen only below it is still drawn) or the floor is not known.
+fn above_floor<'a>(
+    points: impl Iterator<Item = &'a WindowPoint>,
+    floor: Option<&FloorModel>,
+    min_height_m: f64,
+) -> Vec<Vector3<f64>> {
+    let (high, low): (Vec<&WindowPoint>, Vec<&WindowPoint>) = points.partition(|p| {
+        floor.is_none_or(|f| f.height(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)) >= min_height_m)
+    });
+    let kept = if high.is_empty() { low } else { high };
+    kept.into_iter().map(WindowPoint::xyz).collect()
+}
+
 /// The points within `radius_m` (horizontally) of their per-axis median; all when `radius_m` is 0.
-fn core_points(points: impl Iterator<Item = Vector3<f64>>, radius_m: f64) -> Vec<Vector3<f64>> {
-    let all: Vec<Vector3<f64>> = points.collect();
+fn core_points(all: Vec<Vector3<f64>>, radius_m: f64) -> Vec<Vector3<f64>> {
     if radius_m <= 0.0 || all.is_empty() {
         return all;
     }
@@ -238,5 +275,24 @@ mod tests {
         // Everything else is the LIO's generic default.
         let generic = LioConfig::default();
         assert_eq!(LioConfig { noise: generic.noise, ..RobotCoreConfig::robot_lio() }, generic);
+    }
+
+    fn point(z_m: f32) -> WindowPoint {
+        WindowPoint { x_m: 1.0, y_m: 2.0, z_m, t_ns: 0 }
+    }
+
+    #[test]
+    fn a_walkers_lower_legs_are_left_out_but_never_the_whole_person() {
+        // The floor 0.5 m below the world's origin.
+        let floor = FloorModel::flat(-0.5);
+        let body = [point(-0.45), point(-0.2), point(0.0), point(0.8)];
+        let z = |v: Vec<Vector3<f64>>| v.iter().map(|p| (p.z * 100.0).round()).collect::<Vec<_>>();
+        assert_eq!(z(above_floor(body.iter(), Some(&floor), 0.4)), [0.0, 80.0]);
+        assert_eq!(z(above_floor(body.iter(), Some(&floor), f64::MIN)).len(), 4);
+        // No floor: nothing is known to be low.
+        assert_eq!(z(above_floor(body.iter(), None, 0.4)).len(), 4);
+        // Seen only below the cut (legs under a table): all of it.
+        let legs = [point(-0.45), point(-0.2)];
+        assert_eq!(z(above_floor(legs.iter(), Some(&floor), 0.4)).len(), 2);
     }
 }
