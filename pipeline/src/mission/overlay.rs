@@ -2,7 +2,7 @@
 //! sighting, held for a while after the robot last saw them, with their age. A person is drawn
 //! once confirmed: seen in two detection windows within `CONFIRM_NS` of each other (a single
 //! window's false positive, held for a second, would otherwise stand on screen where no one is).
-//! A person seen moving is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
+//! A person seen walking is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
 //! they were last seen, their points no longer show where they are.
 
 use super::person_motion;
@@ -14,9 +14,15 @@ use std::collections::VecDeque;
 const SAME_PERSON_M: f64 = 0.7;
 /// Two sightings of one person at most this far apart confirm them.
 const CONFIRM_NS: u64 = 500_000_000;
-/// A person is drawn at their last sighting while their speed times its age is at most this
-/// (a body's half width: beyond it, most of the drawn points miss them).
-const MAX_DRIFT_M: f64 = 0.25;
+/// A walker is drawn at their last sighting while their speed times its age is at most this
+/// (a tenth of a body's width: the share of the drawn points that miss them grows with it, to
+/// half at 0.25 m, measured in the lab).
+const MAX_DRIFT_M: f64 = 0.1;
+/// Walkers are upright and faster than this; a standing person's centre wanders by a few
+/// centimetres from window to window, and a lying person's, seen sliding out of the view, by
+/// more, but neither walks away from their points.
+const WALKING_MPS: f64 = 0.3;
+const WALKER_MIN_HEIGHT_M: f64 = 1.0;
 /// Speeds are measured over at least this long (a centre jitters by centimetres per window).
 const MIN_SPEED_BASELINE_NS: u64 = 200_000_000;
 
@@ -54,7 +60,7 @@ impl Overlay {
     }
 
     /// Everyone seen in the `hold_ns` up to `t_ns`, each at their latest sighting, aged; people
-    /// seen moving only while they cannot have walked `MAX_DRIFT_M` since.
+    /// seen walking only while they cannot have walked `MAX_DRIFT_M` since.
     pub fn at(&self, t_ns: u64) -> Vec<ArPerson> {
         let mut out: Vec<ArPerson> = Vec::new();
         // Latest sightings not drawn: their person's older sightings are not drawn either.
@@ -76,7 +82,9 @@ impl Overlay {
                     continue;
                 }
                 let age_ns = t_ns - s.stamp_ns;
-                if self.speed_mps(s.stamp_ns, &b.centre_m) * age_ns as f64 * 1e-9 > MAX_DRIFT_M {
+                let speed = self.speed_mps(s.stamp_ns, &b.centre_m);
+                let walking = b.size_m.z >= WALKER_MIN_HEIGHT_M && speed >= WALKING_MPS;
+                if walking && speed * age_ns as f64 * 1e-9 > MAX_DRIFT_M {
                     dropped.push(b.centre_m);
                 } else {
                     out.push(ArPerson { age_ns, ..p.clone() });
@@ -184,14 +192,32 @@ mod tests {
         let walker = |o: &Overlay, t_ms: u64| {
             o.at(t_ms * MS).iter().filter(|p| p.bbox.is_some_and(|b| b.centre_m.x < 2.0)).count()
         };
-        assert_eq!(walker(&o, 600), 1, "0.14 m since their last sighting");
-        assert_eq!(walker(&o, 700), 0, "0.28 m: no longer where they were drawn");
+        assert_eq!(walker(&o, 550), 1, "0.07 m since their last sighting");
+        assert_eq!(walker(&o, 600), 0, "0.14 m: no longer where they were drawn");
         assert_eq!(walker(&o, 1_400), 0, "nor at an older sighting");
         // Later detections without the walker do not make them stand still.
         o.push(1_200 * MS, vec![person(5.0)]);
         o.push(1_450 * MS, vec![person(5.0)]);
         assert_eq!(walker(&o, 1_450), 0, "their speed outlives the sightings it was measured on");
         assert_eq!(o.at(1_400 * MS).len(), 1, "the standing person is held for the whole second");
+    }
+
+    #[test]
+    fn only_an_upright_person_faster_than_a_stroll_walks_away_from_their_points() {
+        const MS: u64 = 1_000_000;
+        let lying = |x: f64| {
+            let mut p = person(x);
+            if let Some(b) = p.bbox.as_mut() {
+                b.size_m = Vector3::new(1.7, 0.5, 0.3);
+            }
+            p
+        };
+        let mut o = Overlay::new(1_000 * MS);
+        // A standing person's centre wandering at 0.2 m/s, a lying person's sliding at 0.5 m/s.
+        for k in 1..=5u32 {
+            o.push(u64::from(k) * 100 * MS, vec![person(0.02 * f64::from(k)), lying(5.0 + 0.05 * f64::from(k))]);
+        }
+        assert_eq!(o.at(1_400 * MS).len(), 2, "both held for the whole second");
     }
 
     #[test]
