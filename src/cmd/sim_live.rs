@@ -45,20 +45,37 @@ pub struct LiveOptions {
     pub view: crate::view::ViewConfig,
 }
 
-fn free_port_tcp() -> anyhow::Result<u16> {
-    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+/// Free loopback ports for the nodes: each socket is held until every port is chosen, so that
+/// the kernel cannot hand out one port twice (a port freed at once can come back on the next
+/// bind: the rig's driver once got the robot's command port).
+#[derive(Default)]
+struct FreePorts {
+    udp: Vec<std::net::UdpSocket>,
+    tcp: Vec<std::net::TcpListener>,
 }
 
-fn free_port_udp() -> anyhow::Result<u16> {
-    Ok(std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
+impl FreePorts {
+    fn udp(&mut self) -> anyhow::Result<u16> {
+        let socket = std::net::UdpSocket::bind("127.0.0.1:0")?;
+        let port = socket.local_addr()?.port();
+        self.udp.push(socket);
+        Ok(port)
+    }
+
+    fn tcp(&mut self) -> anyhow::Result<u16> {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
+        let port = listener.local_addr()?.port();
+        self.tcp.push(listener);
+        Ok(port)
+    }
 }
 
-fn driver(broadcast_port: u16) -> anyhow::Result<DriverConfig> {
-    let data_port = free_port_udp()?;
+fn driver(ports: &mut FreePorts, broadcast_port: u16) -> anyhow::Result<DriverConfig> {
+    let data_port = ports.udp()?;
     Ok(DriverConfig {
         host_ip: Ipv4Addr::LOCALHOST,
         broadcast_listen: Some(SocketAddrV4::new(Ipv4Addr::LOCALHOST, broadcast_port)),
-        cmd_port: free_port_udp()?,
+        cmd_port: ports.udp()?,
         data_port,
         imu_port: data_port,
         accept_unsolicited_data: false,
@@ -110,9 +127,10 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let (_, _, hint_yaw) = hint.rotation.euler_angles();
     let t = hint.translation.vector;
 
-    let (robot_bcast, fpv_bcast, link_port) = (free_port_udp()?, free_port_udp()?, free_port_tcp()?);
+    let mut ports = FreePorts::default();
+    let (robot_bcast, fpv_bcast, link_port) = (ports.udp()?, ports.udp()?, ports.tcp()?);
     let robot_cfg = RobotNodeConfig {
-        livox: driver(robot_bcast)?,
+        livox: driver(&mut ports, robot_bcast)?,
         lidar_ip: Some(ROBOT_MOCK),
         lio: None,
         map_period_ms: 1000,
@@ -122,7 +140,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let q = lidar_t_camera.rotation.quaternion();
     let c = lidar_t_camera.translation.vector;
     let fpv_cfg = FpvNodeConfig {
-        livox: driver(fpv_bcast)?,
+        livox: driver(&mut ports, fpv_bcast)?,
         lidar_ip: Some(FPV_MOCK),
         lio: None,
         render: None,
@@ -140,6 +158,9 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         link: link(None, Some(link_port))?,
     };
     let schedule: Vec<(u64, u64)> = score.truth.frames.iter().map(|f| (f.index, f.t_ns)).collect();
+
+    // Released for the nodes to bind.
+    drop(ports);
 
     // The mocks, on their own runtime: playback starts PLAYBACK_LEAD_NS after now, at the first stamp.
     // They stand in for devices that cost a real host no CPU: below the nodes when the cores are busy.
