@@ -361,3 +361,19 @@ impl Tally {
         }
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::FreePorts;
+
+    #[test]
+    fn free_ports_are_never_handed_out_twice() {
+        let mut ports = FreePorts::default();
+        let mut seen: Vec<u16> = (0..200).map(|_| ports.udp().unwrap()).collect();
+        seen.extend((0..50).map(|_| ports.tcp().unwrap()));
+        let udp: std::collections::HashSet<u16> = seen[..200].iter().copied().collect();
+        let tcp: std::collections::HashSet<u16> = seen[200..].iter().copied().collect();
+        assert_eq!((udp.len(), tcp.len()), (200, 50));
+    }
+}
