@@ -116,8 +116,8 @@ impl Overlay {
     fn latest_sighting(&self, stamp_ns: u64, centre: &Vector3<f64>, t_ns: u64) -> Vector3<f64> {
         let mut last = (stamp_ns, centre.xy());
         for s in self.shown.iter().filter(|s| s.stamp_ns > stamp_ns && s.stamp_ns <= t_ns) {
-            let centres: Vec<Vector3<f64>> = s.people.iter().filter_map(|p| p.bbox).map(|b| b.centre_m).collect();
-            if let Some(c) = person_motion::same_person(last, s.stamp_ns, centres.iter()) {
+            let centres = s.people.iter().filter_map(|p| p.bbox).map(|b| b.centre_m);
+            if let Some(c) = person_motion::next_sighting(last, s.stamp_ns, centres) {
                 last = (s.stamp_ns, c);
             }
         }

@@ -1,6 +1,5 @@
-//! How fast each person the robot finds is walking, from the centres of their recent detections,
-//! so that their returns can be drawn where they were at the window's end rather than smeared
-//! along their path over the scan (the LIO de-skews the robot's own motion, not theirs).
+//! How fast each person the robot finds is walking, from the centres of their recent detections:
+//! a walker's lower legs, smeared over a stride by the scan, are left out of what is drawn.
 
 use nalgebra::{Vector2, Vector3};
 use std::collections::VecDeque;
@@ -37,7 +36,7 @@ impl PersonMotion {
             if t_ns.saturating_add(self.span_ns) < stamp_ns {
                 break;
             }
-            if let Some(c) = same_person(last, *t_ns, centres.iter()) {
+            if let Some(c) = next_sighting(last, *t_ns, centres.iter().copied()) {
                 last = (*t_ns, c);
                 track.push((-((stamp_ns - t_ns) as f64) * 1e-9, c));
             }
@@ -69,10 +68,10 @@ impl PersonMotion {
 
 /// Of the centres of a detection window at `t_ns`, the one of the person last seen at `last`
 /// (stamp, centre), if any: the nearest within a step plus a brisk walk over the time between.
-pub(super) fn same_person<'a>(
+pub(super) fn next_sighting(
     last: (u64, Vector2<f64>),
     t_ns: u64,
-    centres: impl Iterator<Item = &'a Vector3<f64>>,
+    centres: impl Iterator<Item = Vector3<f64>>,
 ) -> Option<Vector2<f64>> {
     let reach = SAME_PERSON_M + WALK_MPS * last.0.abs_diff(t_ns) as f64 * 1e-9;
     centres
