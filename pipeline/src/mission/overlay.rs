@@ -5,7 +5,7 @@
 //! A person seen walking is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
 //! they were last seen, their points no longer show where they are.
 
-use super::person_motion;
+use super::person_motion::{self, WALKING_MPS};
 use crate::ar::{ArPerson, OrientedBox};
 use nalgebra::Vector3;
 use std::collections::VecDeque;
@@ -18,10 +18,8 @@ const CONFIRM_NS: u64 = 500_000_000;
 /// (a tenth of a body's width: the share of the drawn points that miss them grows with it, to
 /// half at 0.25 m, measured in the lab).
 const MAX_DRIFT_M: f64 = 0.1;
-/// Walkers are upright and faster than this; a standing person's centre wanders by a few
-/// centimetres from window to window, and a lying person's, seen sliding out of the view, by
-/// more, but neither walks away from their points.
-const WALKING_MPS: f64 = 0.3;
+/// Walkers are upright (this tall) and faster than [`WALKING_MPS`]; a lying person's centre,
+/// seen sliding out of the view, moves too, but they do not walk away from their points.
 const WALKER_MIN_HEIGHT_M: f64 = 1.0;
 /// Speeds are measured over at least this long (a centre jitters by centimetres per window).
 const MIN_SPEED_BASELINE_NS: u64 = 200_000_000;
@@ -71,12 +69,11 @@ impl Overlay {
                 // Someone already drawn or dropped at a later sighting: the newest one nearby, or
                 // theirs followed window by window (a walker is by then further away than one
                 // person's sightings are apart, and would be drawn twice).
-                let latest = self.latest_sighting(s.stamp_ns, &b.centre_m, t_ns);
-                let seen = out
-                    .iter()
-                    .filter_map(|q| q.bbox)
-                    .any(|c| same_person(&c.centre_m, &b.centre_m) || same_person(&c.centre_m, &latest))
-                    || dropped.iter().any(|c| same_person(c, &b.centre_m) || same_person(c, &latest));
+                let shown_near = |c: &Vector3<f64>| {
+                    out.iter().filter_map(|q| q.bbox).any(|q| same_person(&q.centre_m, c))
+                        || dropped.iter().any(|q| same_person(q, c))
+                };
+                let seen = shown_near(&b.centre_m) || shown_near(&self.latest_sighting(s.stamp_ns, &b.centre_m, t_ns));
                 // Confirmed by an earlier sighting in the `CONFIRM_NS` before this one.
                 if seen || self.earlier_sighting(s.stamp_ns, 1, &b.centre_m).is_none() {
                     continue;

@@ -9,6 +9,10 @@ use std::collections::VecDeque;
 const SAME_PERSON_M: f64 = 0.3;
 const WALK_MPS: f64 = 1.5;
 
+/// A person at least this fast is walking (a standing person's detected centre wanders by a few
+/// centimetres from window to window, well under this).
+pub const WALKING_MPS: f64 = 0.3;
+
 /// The centres of every detection of the last `span_ns`, window by window.
 #[derive(Debug, Default)]
 pub struct PersonMotion {

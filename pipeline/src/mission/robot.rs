@@ -2,7 +2,7 @@
 //! of every scan, person detections over a short window of placed scans, and the map the rig
 //! aligns to (kept as one point per voxel, handed out as changed map tiles) out.
 
-use super::person_motion::PersonMotion;
+use super::person_motion::{PersonMotion, WALKING_MPS};
 use super::place::ScanPlacer;
 use super::robot_map::{RobotMap, RobotMapConfig};
 use crate::ar::{ArPerson, OrientedBox};
@@ -78,7 +78,7 @@ impl Default for RobotCoreConfig {
             tile_edge_m: 4.0,
             tile_step_m: 0.01,
             person_radius_m: 0.25,
-            walker_speed_mps: 0.3,
+            walker_speed_mps: WALKING_MPS,
             walker_min_height_m: 0.4,
             motion_span_ns: 500_000_000,
             motion_min_baseline_ns: 200_000_000,
