@@ -36,32 +36,54 @@ const LOW_HEIGHT_SOFT_M: f64 = 0.1;
 const UPPER_HEIGHT_SOFT_M: f64 = 0.05;
 const LYING_HEIGHT_SOFT_M: f64 = 0.05;
 
+/// The gates a partial view of a person fails: a sliver left by a door, a table or the side of
+/// the view is flat, thin and all faces.
+#[derive(Clone, Copy)]
+struct ShapeGates {
+    max_face_share: f64,
+    /// Below the usual minimum width (which depends on the cluster's points) when set.
+    min_width_m: Option<f64>,
+    min_thickness_m: f64,
+    lying_min_length_m: f64,
+}
+
 /// The best posture and its score in [0, 1].
 pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
-    score_with(f, cfg, cfg.max_face_share, cfg.lying_length_m[0])
+    let gates = ShapeGates {
+        max_face_share: cfg.max_face_share,
+        min_width_m: None,
+        min_thickness_m: cfg.min_thickness_m,
+        lying_min_length_m: cfg.lying_length_m[0],
+    };
+    score_with(f, cfg, gates)
 }
 
 /// [`score`] of a person already followed: the gates a partial view fails are those of
-/// `follow_max_face_share` and `follow_lying_min_length_m`.
+/// `follow_max_face_share`, `follow_min_width_m`, `follow_min_thickness_m` and
+/// `follow_lying_min_length_m`.
 pub fn score_followed(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
-    score_with(f, cfg, cfg.follow_max_face_share, cfg.follow_lying_min_length_m.min(cfg.lying_length_m[0]))
+    let gates = ShapeGates {
+        max_face_share: cfg.follow_max_face_share,
+        min_width_m: Some(cfg.follow_min_width_m),
+        min_thickness_m: cfg.follow_min_thickness_m.min(cfg.min_thickness_m),
+        lying_min_length_m: cfg.follow_lying_min_length_m.min(cfg.lying_length_m[0]),
+    };
+    score_with(f, cfg, gates)
 }
 
-fn score_with(
-    f: &ClusterFeatures,
-    cfg: &DetectConfig,
-    max_face_share: f64,
-    lying_min_length_m: f64,
-) -> (PersonPose, f64) {
+fn score_with(f: &ClusterFeatures, cfg: &DetectConfig, gates: ShapeGates) -> (PersonPose, f64) {
     let (length, width, height) = (f.size.x, f.size.y, f.size.z);
     // Boxes and slabs: standing or sitting people are thicker than a face and not boxy. (A
     // lying body is low and round: most of its points are near its box's faces anyway.) With
     // few points (far away, a sliver through a gap) most of them are near some face anyway, so
     // only nearly all of them on faces counts against it.
     let min_width = if f.points >= FACE_MIN_POINTS { MIN_WIDTH_M } else { MIN_WIDTH_FEW_POINTS_M };
-    let max_face = if f.points >= FACE_MIN_POINTS { max_face_share } else { (max_face_share + 0.25).min(0.9) };
+    let min_width = gates.min_width_m.map_or(min_width, |w| w.min(min_width));
+    let max_face_share = gates.max_face_share;
+    let max_face =
+        if f.points >= FACE_MIN_POINTS { max_face_share } else { (max_face_share + 0.25).min(0.9).max(max_face_share) };
     let boxy = band(f.face_share, 0.0, max_face, 0.1);
-    let thick = band(f.thickness_m, cfg.min_thickness_m, f64::MAX, 0.005) * boxy;
+    let thick = band(f.thickness_m, gates.min_thickness_m, f64::MAX, 0.005) * boxy;
     // Whole bodies are not flat; head and shoulders alone can be (and are judged without it).
     let not_flat = band(f.planarity, 0.0, cfg.max_planarity, 0.05);
     let upright = thick
@@ -86,7 +108,7 @@ fn score_with(
         * band(width, min_width, 0.7, 0.03);
     let lying = not_flat
         * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], LYING_HEIGHT_SOFT_M)
-        * band(length, lying_min_length_m, cfg.lying_length_m[1], 0.15)
+        * band(length, gates.lying_min_length_m, cfg.lying_length_m[1], 0.15)
         * band(width, 0.15, cfg.lying_max_width_m, 0.1)
         * band(f.bottom_m, f64::MIN, 0.3, 0.1);
     let (pose, shape) =

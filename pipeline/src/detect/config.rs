@@ -83,6 +83,10 @@ pub struct DetectConfig {
     pub follow_walk_mps: f64,
     pub follow_radius_m: f64,
     pub follow_max_face_share: f64,
+    /// ... a width down to this (a sliver of them beside a door or the side of the view) ...
+    pub follow_min_width_m: f64,
+    /// ... a thickness down to this (a narrow strip of a body is as flat as the range noise) ...
+    pub follow_min_thickness_m: f64,
     /// ... or a lying body shorter than `lying_length_m[0]` down to this (cut by the side of the
     /// view as the robot turns away).
     pub follow_lying_min_length_m: f64,
@@ -117,11 +121,13 @@ impl Default for DetectConfig {
             min_thickness_m: 0.02,
             min_score: 0.5,
             fov_edge_margin_deg: 1.0,
-            follow_s: 1.0,
+            follow_s: 1.5,
             follow_min_confirmations: 5,
             follow_walk_mps: 1.5,
             follow_radius_m: 0.4,
-            follow_max_face_share: 0.75,
+            follow_max_face_share: 1.0,
+            follow_min_width_m: 0.05,
+            follow_min_thickness_m: 0.01,
             follow_lying_min_length_m: 0.5,
         }
     }
@@ -182,6 +188,10 @@ impl DetectConfig {
         }
         if !(self.follow_radius_m.is_finite() && (0.0..=2.0).contains(&self.follow_radius_m)) {
             return Err(bad("follow_radius_m must be between 0 and 2"));
+        }
+        let slivers = [self.follow_min_width_m, self.follow_min_thickness_m];
+        if slivers.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(bad("follow_min_width_m and follow_min_thickness_m must be finite and not negative"));
         }
         if !(self.follow_lying_min_length_m.is_finite() && self.follow_lying_min_length_m >= 0.0) {
             return Err(bad("follow_lying_min_length_m must be finite and not negative"));

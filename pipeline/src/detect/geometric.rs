@@ -5,6 +5,7 @@ use super::classify::{score, score_followed, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
+use super::follow::tracks;
 use super::fov::FovEnvelope;
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
 use crate::PipelineError;
@@ -87,18 +88,17 @@ impl Detector for GeometricDetector {
         // towards the track, the last one starts the time it is followed for.
         self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
         let followed = std::mem::take(&mut self.confirmed);
+        let tracks = tracks(&followed, cfg.follow_radius_m, cfg.follow_walk_mps);
         let near_followed = |xy: Vector2<f64>| {
-            let last_seen_here =
-                followed.iter().any(|(at, t)| now_ns - t <= follow_ns && (at - xy).norm() <= cfg.follow_radius_m);
-            let theirs = followed
-                .iter()
-                .filter(|(at, t)| {
-                    let age_s = (now_ns - t) as f64 * 1e-9;
-                    (at - xy).norm() <= cfg.follow_radius_m + cfg.follow_walk_mps * age_s
-                })
-                .count();
-            last_seen_here && theirs >= cfg.follow_min_confirmations
+            tracks.iter().any(|tr| {
+                tr.confirmations >= cfg.follow_min_confirmations
+                    && now_ns - tr.t_ns <= follow_ns
+                    && tr.reaches(xy, now_ns, cfg.follow_radius_m)
+            })
         };
+        // Partial views of followed people, kept once every full confirmation of this window is
+        // known: a piece of someone confirmed whole here is not a second person.
+        let mut partial: Vec<(ClusterFeatures, PersonPose, f64, Vec<u32>)> = Vec::new();
         let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
         let sensor = window.sensor_pose.translation.vector;
         let floor = estimate_floor(window.points, sensor.z, cfg);
@@ -161,7 +161,7 @@ impl Detector for GeometricDetector {
             else {
                 continue;
             };
-            let (mut pose, mut s) = score(&f, cfg);
+            let (pose, mut s) = score(&f, cfg);
             // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
             let structure = f.top_m > top - CEILING_CONTACT_M;
             if structure {
@@ -198,29 +198,23 @@ impl Detector for GeometricDetector {
             );
             if s >= cfg.min_score {
                 confirmed_now.push((xy, now_ns));
-            } else if !structure && follow_ns > 0 && near_followed(xy) {
-                // Someone every gate saw here moments ago: judged as a partial view of them.
-                (pose, s) = score_followed(&f, cfg);
-            }
-            if s >= cfg.min_score {
-                let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;
-                let (bottom, height) = if floor_touch { (0.0, f.top_m) } else { (f.bottom_m, f.size.z) };
-                let cx = f.centre.x;
-                let cy = f.centre.y;
-                let cz = floor.a * cx + floor.b * cy + floor.c + bottom + height / 2.0;
-                let mut idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
-                idx.sort_unstable();
-                out.push(Detection {
-                    stamp: window.stamp,
-                    centre_m: Vector3::new(cx, cy, cz),
-                    size_m: Vector3::new(f.size.x, f.size.y, height),
-                    yaw_rad: f.yaw_rad,
-                    score: s,
-                    pose,
-                    point_indices: idx,
-                });
+                out.push(detection(window, &floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
                 self.last_clusters.push((f, s));
                 continue;
+            }
+            if !structure && follow_ns > 0 && near_followed(xy) {
+                // Someone every gate saw here moments ago: judged as a partial view of them.
+                let (followed_pose, followed_score) = score_followed(&f, cfg);
+                if followed_score >= cfg.min_score {
+                    partial.push((
+                        f.clone(),
+                        followed_pose,
+                        followed_score,
+                        grid.points_of_cluster(&cluster).collect(),
+                    ));
+                    self.last_clusters.push((f, followed_score));
+                    continue;
+                }
             }
             let split_it = depth < cfg.max_planes && too_big(&f, cfg);
             self.last_clusters.push((f, s));
@@ -228,8 +222,44 @@ impl Detector for GeometricDetector {
                 stack.extend(split(&grid, &cluster, cfg, depth));
             }
         }
+        partial.sort_by(|a, b| b.2.total_cmp(&a.2));
+        let mut taken: Vec<Vector2<f64>> = confirmed_now.iter().map(|c| c.0).collect();
+        for (f, pose, s, idx) in partial {
+            let xy = Vector2::new(f.centre.x, f.centre.y);
+            if taken.iter().all(|at| (at - xy).norm() > cfg.follow_radius_m) {
+                taken.push(xy);
+                out.push(detection(window, &floor, &f, pose, s, idx.into_iter(), cfg));
+            }
+        }
         self.confirmed = followed;
         self.confirmed.extend(confirmed_now);
+    }
+}
+
+/// A person's box from their cluster: one whose feet are at the floor band stands on the floor.
+fn detection(
+    window: &DetectWindow<'_>,
+    floor: &FloorModel,
+    f: &ClusterFeatures,
+    pose: PersonPose,
+    score: f64,
+    points: impl Iterator<Item = u32>,
+    cfg: &DetectConfig,
+) -> Detection {
+    let floor_touch = f.bottom_m <= cfg.floor_band_m + 0.15;
+    let (bottom, height) = if floor_touch { (0.0, f.top_m) } else { (f.bottom_m, f.size.z) };
+    let (cx, cy) = (f.centre.x, f.centre.y);
+    let cz = floor.a * cx + floor.b * cy + floor.c + bottom + height / 2.0;
+    let mut point_indices: Vec<u32> = points.collect();
+    point_indices.sort_unstable();
+    Detection {
+        stamp: window.stamp,
+        centre_m: Vector3::new(cx, cy, cz),
+        size_m: Vector3::new(f.size.x, f.size.y, height),
+        yaw_rad: f.yaw_rad,
+        score,
+        pose,
+        point_indices,
     }
 }
 

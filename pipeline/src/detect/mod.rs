@@ -28,6 +28,7 @@ mod config;
 pub mod eval;
 mod features;
 mod floor;
+mod follow;
 mod fov;
 mod geometric;
 

@@ -35,7 +35,7 @@ pub struct RobotCoreConfig {
     /// Only a person's points this close (in the floor plane) to the median of their points are
     /// drawn: what the cluster took from a chair or a wall beside them is not (0: all).
     pub person_radius_m: f64,
-    /// An upright person walking at least `walker_speed_mps` (fitted to their detections of the
+    /// A person (not lying) walking at least `walker_speed_mps` (fitted to their detections of the
     /// last `motion_span_ns`, over at least `motion_min_baseline_ns`) is drawn without their
     /// returns lower than `walker_min_height_m` above the floor: a walker's lower legs swing at
     /// two to three times their pace, so where the scan saw them is not where they are (0: all
@@ -196,7 +196,9 @@ impl RobotCore {
             .map(|det| {
                 let fresh =
                     det.point_indices.iter().filter_map(|&i| points.get(i as usize)).filter(|p| p.t_ns >= fresh_from);
-                let walking = det.pose == PersonPose::Upright
+                // Anyone but a lying person: a walker seen in part (a sliver past a door's edge)
+                // is judged sitting or crouching by their shape alone.
+                let walking = det.pose != PersonPose::Lying
                     && self.cfg.walker_min_height_m > 0.0
                     && self.motion.velocity(o.end_ns, &det.centre_m).norm() >= self.cfg.walker_speed_mps;
                 let min_height_m = if walking { self.cfg.walker_min_height_m } else { f64::MIN };
