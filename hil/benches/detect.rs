@@ -145,7 +145,8 @@ fn dump(dir: &str, t_s: f64, cfg: &DetectConfig) {
 }
 
 /// Appends every scored cluster of every window to a CSV (tuning): scenario, time, share of its
-/// points labelled as a person, features, score.
+/// points labelled as a person, features, score, top share, then its silhouette (top free,
+/// bottom hidden, columns with a return above, below).
 fn features_csv(name: &str, run: &detect_sim::SimRun, cfg: &DetectConfig, path: &str) {
     use starc_pipeline::detect::Detector;
     use std::io::Write;
@@ -158,11 +159,13 @@ fn features_csv(name: &str, run: &detect_sim::SimRun, cfg: &DetectConfig, path: 
         let (window, labels) = detect_sim::window_at(run, end, 300_000_000);
         found.clear();
         det.detect(&window, &mut found);
-        for ((f, s), idx) in det.last_clusters().iter().zip(det.last_cluster_points()) {
+        for (((f, s), idx), sil) in
+            det.last_clusters().iter().zip(det.last_cluster_points()).zip(det.last_silhouettes())
+        {
             let person = idx.iter().filter(|&&i| labels[i as usize] != 0).count();
             writeln!(
                 out,
-                "{name},{:.1},{:.3},{:.2},{:.2},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.3},{:.3}",
+                "{name},{:.1},{:.3},{:.2},{:.2},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.3},{:.3},{:.3},{:.3},{},{}",
                 (end - 1_767_225_600_000_000_000) as f64 * 1e-9,
                 person as f64 / idx.len().max(1) as f64,
                 f.centre.x,
@@ -180,7 +183,11 @@ fn features_csv(name: &str, run: &detect_sim::SimRun, cfg: &DetectConfig, path: 
                 f.thickness_m,
                 f.range_m,
                 s,
-                f.top_share
+                f.top_share,
+                sil.top_free,
+                sil.bottom_hidden,
+                sil.top_columns,
+                sil.bottom_columns
             )
             .unwrap();
         }

@@ -99,13 +99,7 @@ fn score_with(f: &ClusterFeatures, cfg: &DetectConfig, gates: ShapeGates) -> (Pe
         * band(length, MIN_LENGTH_M, cfg.upright_max_length_m, 0.15)
         * band(width, min_width, 0.9, 0.03)
         * band(f.bottom_m, f64::MIN, cfg.max_bottom_m, 0.2);
-    // Head and shoulders above a table, a seat back or a stage edge: nothing else floats.
-    let upper = thick
-        * band(height, cfg.upper_body_height_m[0], cfg.upper_body_height_m[1], UPPER_HEIGHT_SOFT_M)
-        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
-        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
-        * band(length, MIN_LENGTH_M, 0.8, 0.1)
-        * band(width, min_width, 0.7, 0.03);
+    let upper = thick * upper_body(f, cfg, cfg.upper_body_height_m, min_width);
     let lying = not_flat
         * band(height, cfg.lying_height_m[0], cfg.lying_height_m[1], LYING_HEIGHT_SOFT_M)
         * band(length, gates.lying_min_length_m, cfg.lying_length_m[1], 0.15)
@@ -117,6 +111,27 @@ fn score_with(f: &ClusterFeatures, cfg: &DetectConfig, gates: ShapeGates) -> (Pe
             .fold((PersonPose::Upright, 0.0), |best, c| if c.1 > best.1 { c } else { best });
     let common = band(f.points as f64, cfg.min_points as f64, f64::MAX, cfg.min_points as f64);
     (pose, shape * common)
+}
+
+/// Head and shoulders above a table, a seat back or a stage edge (nothing else floats): the
+/// gates on size and place alone.
+fn upper_body(f: &ClusterFeatures, cfg: &DetectConfig, height_m: [f64; 2], min_width: f64) -> f64 {
+    band(f.size.z, height_m[0], height_m[1], UPPER_HEIGHT_SOFT_M)
+        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
+        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+        * band(f.size.x, MIN_LENGTH_M, 0.8, 0.1)
+        * band(f.size.y, min_width, 0.7, 0.03)
+}
+
+/// The shape score of someone whose lower body something nearer hides, seen as a sliver
+/// (`behind_height_m` tall, held to the gates of a partial view: any face share, as narrow as
+/// `follow_min_width_m`, as flat as `follow_min_thickness_m`). Only their silhouette tells them
+/// from a strip of structure (see [`super::occlusion`]), so the caller must check it.
+pub fn score_behind(f: &ClusterFeatures, cfg: &DetectConfig) -> f64 {
+    let min_width = cfg.follow_min_width_m.min(MIN_WIDTH_FEW_POINTS_M);
+    let thick = band(f.thickness_m, cfg.follow_min_thickness_m.min(cfg.min_thickness_m), f64::MAX, 0.005);
+    let common = band(f.points as f64, cfg.min_points as f64, f64::MAX, cfg.min_points as f64);
+    thick * upper_body(f, cfg, cfg.behind_height_m, min_width) * common
 }
 
 /// A cluster at least this tall scores 0 in every posture (each height gate's upper edge plus

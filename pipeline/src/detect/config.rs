@@ -90,6 +90,14 @@ pub struct DetectConfig {
     /// ... or a lying body shorter than `lying_length_m[0]` down to this (cut by the side of the
     /// view as the robot turns away).
     pub follow_lying_min_length_m: f64,
+    /// Someone behind something (boxes, a table, a counter) shows only head and shoulders, as a
+    /// sliver as flat and narrow as a partial view: a cluster `behind_height_m` tall, floating
+    /// (its lowest point at least 0.45 m up), with a top and place like head and shoulders, is a
+    /// person when, in at least `behind_min_edge_share` of its columns of the range image, the
+    /// return just above it is farther (the room beyond their head) and the return just below it
+    /// nearer (what hides them). 0 turns it off.
+    pub behind_height_m: [f64; 2],
+    pub behind_min_edge_share: f64,
 }
 
 impl Default for DetectConfig {
@@ -129,6 +137,8 @@ impl Default for DetectConfig {
             follow_min_width_m: 0.05,
             follow_min_thickness_m: 0.01,
             follow_lying_min_length_m: 0.5,
+            behind_height_m: [0.45, 1.2],
+            behind_min_edge_share: 0.75,
         }
     }
 }
@@ -169,13 +179,17 @@ impl DetectConfig {
             self.lying_length_m,
             self.upper_body_height_m,
             self.upper_body_top_m,
+            self.behind_height_m,
         ];
         if ranges.iter().any(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && *lo >= 0.0 && lo < hi)) {
             return Err(bad("every [min, max] range needs 0 <= min < max"));
         }
-        let shares = [self.floor_min_share, self.max_face_share, self.max_planarity, self.min_score];
+        let shares =
+            [self.floor_min_share, self.max_face_share, self.max_planarity, self.min_score, self.behind_min_edge_share];
         if shares.iter().any(|v| !(*v >= 0.0 && *v <= 1.0)) {
-            return Err(bad("floor_min_share, max_face_share, max_planarity and min_score must be in [0, 1]"));
+            return Err(bad(
+                "floor_min_share, max_face_share, max_planarity, min_score and behind_min_edge_share must be in [0, 1]",
+            ));
         }
         if !(self.fov_edge_margin_deg.is_finite() && (0.0..=20.0).contains(&self.fov_edge_margin_deg)) {
             return Err(bad("fov_edge_margin_deg must be between 0 and 20"));

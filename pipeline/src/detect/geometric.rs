@@ -1,12 +1,13 @@
 //! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
 //! clusters, each cluster scored as a person.
 
-use super::classify::{score, score_followed, tallest_scorable_m, too_big};
+use super::classify::{score, score_behind, score_followed, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
 use super::follow::tracks;
 use super::fov::FovEnvelope;
+use super::occlusion::{RangeImage, Silhouette};
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
 use crate::PipelineError;
 use nalgebra::{Vector2, Vector3};
@@ -31,6 +32,7 @@ pub struct GeometricDetector {
     /// When set, the points of every scored cluster are kept too (tuning; costs allocations).
     keep_cluster_points: bool,
     last_cluster_points: Vec<Vec<u32>>,
+    last_silhouettes: Vec<Silhouette>,
 }
 
 impl GeometricDetector {
@@ -44,6 +46,7 @@ impl GeometricDetector {
             last_clusters: Vec::new(),
             keep_cluster_points: false,
             last_cluster_points: Vec::new(),
+            last_silhouettes: Vec::new(),
         })
     }
 
@@ -70,6 +73,11 @@ impl GeometricDetector {
     pub fn last_cluster_points(&self) -> &[Vec<u32>] {
         &self.last_cluster_points
     }
+
+    /// The silhouette of each of [`Self::last_clusters`], when their points are kept.
+    pub fn last_silhouettes(&self) -> &[Silhouette] {
+        &self.last_silhouettes
+    }
 }
 
 impl Detector for GeometricDetector {
@@ -81,6 +89,7 @@ impl Detector for GeometricDetector {
         let cfg = &self.cfg;
         self.last_clusters.clear();
         self.last_cluster_points.clear();
+        self.last_silhouettes.clear();
         let now_ns = window.stamp.ns;
         let follow_ns = (cfg.follow_s * 1e9) as u64;
         // A window older than one already seen (a replay restarted) follows nobody.
@@ -161,14 +170,33 @@ impl Detector for GeometricDetector {
             else {
                 continue;
             };
-            let (pose, mut s) = score(&f, cfg);
+            let (mut pose, mut s) = score(&f, cfg);
             // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
             let structure = f.top_m > top - CEILING_CONTACT_M;
             if structure {
                 s = 0.0;
             }
+            // Head and shoulders over something nearer: the silhouette decides (a cone of the
+            // window around the cluster, for the few clusters shaped like one).
+            if s < cfg.min_score && !structure && cfg.behind_min_edge_share > 0.0 {
+                let behind = score_behind(&f, cfg);
+                if behind >= cfg.min_score {
+                    let idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
+                    let seen = RangeImage::around(points, &window.sensor_pose, &idx)
+                        .map(|image| image.silhouette(points, idx.iter().copied()))
+                        .unwrap_or_default();
+                    let share = cfg.behind_min_edge_share;
+                    if seen.top_columns > 0 && seen.top_free >= share && seen.bottom_hidden >= share {
+                        (pose, s) = (PersonPose::Low, behind);
+                    }
+                }
+            }
             if self.keep_cluster_points {
-                self.last_cluster_points.push(grid.points_of_cluster(&cluster).collect());
+                let idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
+                let image = RangeImage::around(points, &window.sensor_pose, &idx);
+                self.last_silhouettes
+                    .push(image.map(|im| im.silhouette(points, idx.iter().copied())).unwrap_or_default());
+                self.last_cluster_points.push(idx);
             }
             // Cut by the top of the field of view, its height is the view's: only a cluster
             // already as tall as a standing person can be one (checked for candidates only: it

@@ -31,11 +31,13 @@ mod floor;
 mod follow;
 mod fov;
 mod geometric;
+mod occlusion;
 
 pub use config::DetectConfig;
 pub use features::ClusterFeatures;
 pub use floor::{estimate_floor, FloorModel};
 pub use geometric::GeometricDetector;
+pub use occlusion::Silhouette;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use starc_time::Stamp;

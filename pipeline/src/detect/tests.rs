@@ -149,6 +149,8 @@ fn the_shipped_config_loads_and_bad_ones_are_refused() {
     assert!(DetectConfig::from_toml("follow_max_face_share = 2.0").is_err());
     assert!(DetectConfig::from_toml("follow_lying_min_length_m = -0.5").is_err());
     assert!(DetectConfig::from_toml("follow_min_width_m = -0.1").is_err());
+    assert!(DetectConfig::from_toml("behind_min_edge_share = 1.5").is_err());
+    assert!(DetectConfig::from_toml("behind_height_m = [1.0, 0.5]").is_err());
     assert!(DetectConfig::from_toml("follow_min_thickness_m = nan").is_err());
 }
 
@@ -453,4 +455,47 @@ fn the_face_share_is_measured_only_where_it_can_decide() {
     det.keep_cluster_points(true);
     det.detect(&window(&points), &mut Vec::new());
     assert!(det.last_clusters().iter().all(|(f, _)| f.face_share.is_finite()), "{:#?}", det.last_clusters());
+}
+
+/// Someone standing 5 m ahead behind a row of boxes 3 m ahead (0.7 m high), seen from 0.45 m as
+/// a flat sliver of head and shoulders (0.3 m wide, 0.9-1.5 m up), a wall 8 m ahead beyond them.
+fn behind_boxes(boxes: bool) -> Vec<WindowPoint> {
+    let mut p = room(true);
+    if boxes {
+        grid(&mut p, [-0.6, 0.6], [0.0, 0.7], 0.03, |y, z| [3.0, y, z]);
+    }
+    sliver(&mut p, 5.0, 0.0, [0.9, 1.5]);
+    p
+}
+
+/// The same, seen through a slot: a beam 3 m ahead hides what is just above the sliver too.
+fn through_a_slot() -> Vec<WindowPoint> {
+    let mut p = room(true);
+    grid(&mut p, [-0.6, 0.6], [0.0, 0.7], 0.03, |y, z| [3.0, y, z]);
+    grid(&mut p, [-0.6, 0.6], [1.15, 1.35], 0.03, |y, z| [3.0, y, z]);
+    sliver(&mut p, 5.0, 0.0, [0.9, 1.5]);
+    p
+}
+
+#[test]
+fn head_and_shoulders_over_boxes_are_someone_and_the_same_sliver_in_the_open_is_not() {
+    let (_, found) = detect_scene(&behind_boxes(true));
+    assert_eq!(found.len(), 1, "{found:#?}");
+    assert!((found[0].centre_m.x - 5.0).abs() < 0.1 && found[0].centre_m.y.abs() < 0.1, "{found:#?}");
+    assert_eq!(found[0].pose, PersonPose::Low);
+
+    // Nothing nearer below it: a strip hanging in the open is no one seen over something.
+    let (_, found) = detect_scene(&behind_boxes(false));
+    assert!(found.is_empty(), "{found:#?}");
+
+    // Its top hidden too: a strip seen through a slot, whatever it is.
+    let (_, found) = detect_scene(&through_a_slot());
+    assert!(found.iter().all(|d| (d.centre_m.x - 5.0).abs() > 0.5), "{found:#?}");
+
+    // With the check off, the sliver alone is structure (all faces, thinner than 2 cm).
+    let off = DetectConfig { behind_min_edge_share: 0.0, ..DetectConfig::default() };
+    let mut det = GeometricDetector::new(off).unwrap();
+    let mut found = Vec::new();
+    det.detect(&window(&behind_boxes(true)), &mut found);
+    assert!(found.is_empty(), "{found:#?}");
 }
