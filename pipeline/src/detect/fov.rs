@@ -3,7 +3,7 @@
 //! looks like a seated person 1.1 m tall), so its height is where the view ends.
 
 use super::WindowPoint;
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 /// Azimuth bins of the envelope, deg.
 const BIN_DEG: f64 = 2.0;
@@ -44,14 +44,8 @@ impl FovEnvelope {
 
     /// Azimuth bin and elevation (deg) of a point in the sensor's frame.
     fn angles(&self, p: &WindowPoint) -> Option<(usize, f64)> {
-        let d = self.sensor_t_world.transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
-        let horizontal = d.x.hypot(d.y);
-        if !(horizontal > 1e-6 && d.z.is_finite()) {
-            return None;
-        }
-        let az = d.y.atan2(d.x).to_degrees().rem_euclid(360.0);
-        let bin = ((az / BIN_DEG) as usize).min(BINS - 1);
-        Some((bin, d.z.atan2(horizontal).to_degrees()))
+        let (az, el) = az_el_deg(&in_sensor_frame(&self.sensor_t_world, p)?)?;
+        Some((((az / BIN_DEG) as usize).min(BINS - 1), el))
     }
 
     /// Whether the cluster made of `indices` (into `points`) reaches the upper edge of the field
@@ -70,6 +64,20 @@ impl FovEnvelope {
         }
         on_edge >= MIN_EDGE_POINTS && on_edge as f64 >= MIN_EDGE_SHARE * recent as f64
     }
+}
+
+/// A window point in the sensor's frame; `None` for one not finite or at the sensor itself.
+pub(super) fn in_sensor_frame(sensor_t_world: &Isometry3<f64>, p: &WindowPoint) -> Option<Vector3<f64>> {
+    let d = sensor_t_world.transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))).coords;
+    let range = d.norm();
+    (range > 1e-3 && range.is_finite()).then_some(d)
+}
+
+/// Azimuth in [0, 360) and elevation of a direction in the sensor's frame, deg; `None` straight
+/// up or down, where the azimuth is undefined.
+pub(super) fn az_el_deg(d: &Vector3<f64>) -> Option<(f64, f64)> {
+    let horizontal = d.x.hypot(d.y);
+    (horizontal > 1e-6).then(|| (d.y.atan2(d.x).to_degrees().rem_euclid(360.0), d.z.atan2(horizontal).to_degrees()))
 }
 
 #[cfg(test)]

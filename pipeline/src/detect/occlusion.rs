@@ -6,8 +6,9 @@
 //! wall strip, a door jamb or a piece of furniture seen through a gap has its edges where the
 //! gap's own edges are, or continues into what is above and below it at the same range.
 
+use super::fov::{az_el_deg, in_sensor_frame};
 use super::WindowPoint;
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Vector3};
 
 /// Cell size of the image, deg (8 cm at 9 m; about three returns per cell over a 0.3 s window).
 const CELL_DEG: f64 = 0.5;
@@ -57,14 +58,10 @@ impl RangeImage {
     /// of its points has a direction.
     pub fn around(points: &[WindowPoint], world_t_sensor: &Isometry3<f64>, cluster: &[u32]) -> Option<Self> {
         let sensor_t_world = world_t_sensor.inverse();
-        let local = |p: &WindowPoint| {
-            sensor_t_world.transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))).coords
-        };
         let dirs: Vec<Vector3<f64>> = cluster
             .iter()
             .filter_map(|&i| points.get(i as usize))
-            .map(local)
-            .filter(|d| d.iter().all(|v| v.is_finite()) && d.norm() > 1e-3)
+            .filter_map(|p| in_sensor_frame(&sensor_t_world, p))
             .map(|d| d.normalize())
             .collect();
         let mean = dirs.iter().sum::<Vector3<f64>>().try_normalize(1e-9)?;
@@ -75,7 +72,7 @@ impl RangeImage {
             sensor_t_world,
             az0_deg: mean.y.atan2(mean.x).to_degrees(),
             az_from_deg: -half_deg,
-            el_from_deg: (mean.z.asin().to_degrees() - half_deg).max(-90.0),
+            el_from_deg: (mean.z.atan2(mean.xy().norm()).to_degrees() - half_deg).max(-90.0),
             az_cells: (2.0 * half_deg / CELL_DEG) as usize + 1,
             el_cells: (2.0 * half_deg / CELL_DEG) as usize + 1,
             nearest_m: Vec::new(),
@@ -84,12 +81,12 @@ impl RangeImage {
         image.nearest_m = vec![f32::INFINITY; image.az_cells * image.el_cells];
         let cos_half = half_deg.to_radians().cos();
         for p in points {
-            let d = local(p);
+            let Some(d) = in_sensor_frame(&image.sensor_t_world, p) else { continue };
             let range = d.norm();
-            if !(range > 1e-3 && range.is_finite()) || d.dot(&mean) < range * cos_half {
+            if d.dot(&mean) < range * cos_half {
                 continue;
             }
-            if let Some((a, e)) = image.cell_of(&d, range) {
+            if let Some((a, e)) = image.cell_of(&d) {
                 if let Some(n) = image.nearest_m.get_mut(a * image.el_cells + e) {
                     *n = n.min(range as f32);
                 }
@@ -98,9 +95,9 @@ impl RangeImage {
         Some(image)
     }
 
-    fn cell_of(&self, d: &Vector3<f64>, range: f64) -> Option<(usize, usize)> {
-        let az = (d.y.atan2(d.x).to_degrees() - self.az0_deg + 540.0).rem_euclid(360.0) - 180.0;
-        let el = (d.z / range).asin().to_degrees();
+    fn cell_of(&self, d: &Vector3<f64>) -> Option<(usize, usize)> {
+        let (az, el) = az_el_deg(d)?;
+        let az = (az - self.az0_deg + 540.0).rem_euclid(360.0) - 180.0;
         let a = (az - self.az_from_deg) / CELL_DEG;
         let e = (el - self.el_from_deg) / CELL_DEG;
         let inside = (0.0..self.az_cells as f64).contains(&a) && (0.0..self.el_cells as f64).contains(&e);
@@ -109,12 +106,8 @@ impl RangeImage {
 
     /// (azimuth cell, elevation cell) and range of a point.
     fn angles(&self, p: &WindowPoint) -> Option<(usize, usize, f32)> {
-        let d = self.sensor_t_world.transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
-        let range = d.coords.norm();
-        if !(range > 1e-3 && range.is_finite()) {
-            return None;
-        }
-        self.cell_of(&d.coords, range).map(|(a, e)| (a, e, range as f32))
+        let d = in_sensor_frame(&self.sensor_t_world, p)?;
+        self.cell_of(&d).map(|(a, e)| (a, e, d.norm() as f32))
     }
 
     fn nearest(&self, az_cell: usize, el_cells: impl Iterator<Item = usize>) -> Option<f32> {
