@@ -7,7 +7,7 @@
 //! scenario: windows, TP/FP/misses/ignored, precision, recall, recall per pose, the share of
 //! detected points labelled as a person, and the time per window (median, p99).
 //! `STARC_DETECT_RUNS=dir` reuses runs in `dir/<scenario>` (from `starc sim <scenario> --out ...`);
-//! `STARC_DETECT_SEED` picks another seed; `STARC_DETECT_VERBOSE=1` lists the false positives.
+//! `STARC_DETECT_SEED` picks another seed; `STARC_DETECT_VERBOSE=1` lists the misses and false positives.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "../../tests/support/detect_sim.rs"]
@@ -77,6 +77,12 @@ fn main() {
             let mut m: Vec<_> = ev.max_returns.iter().collect();
             m.sort();
             println!("  most returns of each person in one window: {m:?}");
+            for (t, label, pose, n) in &ev.misses {
+                println!(
+                    "  miss t {:.1} s person {label} ({pose}, {n} returns)",
+                    (t - 1_767_225_600_000_000_000) as f64 * 1e-9
+                );
+            }
             for (t, d) in &ev.false_positives {
                 println!(
                     "  FP t {:.1} s {:?} at ({:.2}, {:.2}, {:.2}) size {:.2} x {:.2} x {:.2} score {:.2} points {}",

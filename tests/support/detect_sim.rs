@@ -105,6 +105,8 @@ pub struct Evaluation {
     pub per_pose: HashMap<String, (usize, usize)>,
     /// False positives: (window end ns, detection).
     pub false_positives: Vec<(u64, Detection)>,
+    /// Misses: (window end ns, person label, true pose, returns in the window).
+    pub misses: Vec<(u64, u16, String, usize)>,
     /// Per person label: the most returns one window had of them.
     pub max_returns: HashMap<u16, usize>,
 }
@@ -178,6 +180,9 @@ pub fn evaluate(run: &SimRun, det: &mut dyn Detector, window_ns: u64, hop_ns: u6
             let e = ev.per_pose.entry(r.pose.clone()).or_default();
             e.1 += 1;
             e.0 += usize::from(!m.missed.contains(&r.label));
+            if m.missed.contains(&r.label) {
+                ev.misses.push((end, r.label, r.pose.clone(), returns.get(&r.label).copied().unwrap_or(0)));
+            }
         }
         for (d, label) in found.iter().zip(&m.detection_label) {
             ev.detected_points += d.point_indices.len();
