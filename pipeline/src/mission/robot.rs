@@ -37,9 +37,10 @@ pub struct RobotCoreConfig {
     pub person_radius_m: f64,
     /// A person (not lying) walking at least `walker_speed_mps` (fitted to their detections of the
     /// last `motion_span_ns`, over at least `motion_min_baseline_ns`) is drawn without their
-    /// returns lower than `walker_min_height_m` above the floor: a walker's lower legs swing at
-    /// two to three times their pace, so where the scan saw them is not where they are (0: all
-    /// drawn).
+    /// returns lower than `walker_min_height_m` above the floor: a walker's legs swing (a foot at
+    /// two to three times their pace, a knee at up to twice it), so where the scan saw them is not
+    /// where they are. The default, 0.8 m, is just under an adult's hips (about half their
+    /// height); 0 draws them whole.
     pub walker_speed_mps: f64,
     pub walker_min_height_m: f64,
     pub motion_span_ns: u64,
@@ -79,7 +80,7 @@ impl Default for RobotCoreConfig {
             tile_step_m: 0.01,
             person_radius_m: 0.25,
             walker_speed_mps: WALKING_MPS,
-            walker_min_height_m: 0.4,
+            walker_min_height_m: 0.8,
             motion_span_ns: 500_000_000,
             motion_min_baseline_ns: 200_000_000,
         }
