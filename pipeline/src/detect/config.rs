@@ -130,7 +130,7 @@ impl Default for DetectConfig {
             min_score: 0.5,
             fov_edge_margin_deg: 1.0,
             follow_s: 1.5,
-            follow_min_confirmations: 5,
+            follow_min_confirmations: 4,
             follow_walk_mps: 1.5,
             follow_radius_m: 0.4,
             follow_max_face_share: 1.0,
