@@ -45,6 +45,8 @@ struct ShapeGates {
     min_width_m: Option<f64>,
     min_thickness_m: f64,
     lying_min_length_m: f64,
+    /// A head alone (its shoulders sunk behind a table) may be all that is left of someone.
+    head_alone: bool,
 }
 
 /// The best posture and its score in [0, 1].
@@ -54,6 +56,7 @@ pub fn score(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f64) {
         min_width_m: None,
         min_thickness_m: cfg.min_thickness_m,
         lying_min_length_m: cfg.lying_length_m[0],
+        head_alone: false,
     };
     score_with(f, cfg, gates)
 }
@@ -67,6 +70,7 @@ pub fn score_followed(f: &ClusterFeatures, cfg: &DetectConfig) -> (PersonPose, f
         min_width_m: Some(cfg.follow_min_width_m),
         min_thickness_m: cfg.follow_min_thickness_m.min(cfg.min_thickness_m),
         lying_min_length_m: cfg.follow_lying_min_length_m.min(cfg.lying_length_m[0]),
+        head_alone: true,
     };
     score_with(f, cfg, gates)
 }
@@ -105,10 +109,16 @@ fn score_with(f: &ClusterFeatures, cfg: &DetectConfig, gates: ShapeGates) -> (Pe
         * band(length, gates.lying_min_length_m, cfg.lying_length_m[1], 0.15)
         * band(width, 0.15, cfg.lying_max_width_m, 0.1)
         * band(f.bottom_m, f64::MIN, 0.3, 0.1);
-    let (pose, shape) =
-        [(PersonPose::Upright, upright), (PersonPose::Low, low), (PersonPose::Low, upper), (PersonPose::Lying, lying)]
-            .into_iter()
-            .fold((PersonPose::Upright, 0.0), |best, c| if c.1 > best.1 { c } else { best });
+    let head = if gates.head_alone { thick * head_alone(f, cfg, min_width) } else { 0.0 };
+    let (pose, shape) = [
+        (PersonPose::Upright, upright),
+        (PersonPose::Low, low),
+        (PersonPose::Low, upper),
+        (PersonPose::Low, head),
+        (PersonPose::Lying, lying),
+    ]
+    .into_iter()
+    .fold((PersonPose::Upright, 0.0), |best, c| if c.1 > best.1 { c } else { best });
     let common = band(f.points as f64, cfg.min_points as f64, f64::MAX, cfg.min_points as f64);
     (pose, shape * common)
 }
@@ -121,6 +131,22 @@ fn upper_body(f: &ClusterFeatures, cfg: &DetectConfig, height_m: [f64; 2], min_w
         * band(f.bottom_m, 0.45, f64::MAX, 0.1)
         * band(f.size.x, MIN_LENGTH_M, 0.8, 0.1)
         * band(f.size.y, min_width, 0.7, 0.03)
+}
+
+/// A head is 0.2-0.25 m tall and at most about 0.25 m across either way.
+const HEAD_HEIGHT_M: [f64; 2] = [0.15, 0.3];
+const HEAD_MAX_SIDE_M: f64 = 0.3;
+const HEAD_SOFT_M: f64 = 0.03;
+
+/// A head alone over a table edge or a seat back, where a person already followed was (its
+/// place and top are those of head and shoulders; it is no wider than a head, so no table top or
+/// lectern is taken for one).
+fn head_alone(f: &ClusterFeatures, cfg: &DetectConfig, min_width: f64) -> f64 {
+    band(f.size.z, HEAD_HEIGHT_M[0], HEAD_HEIGHT_M[1], HEAD_SOFT_M)
+        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
+        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+        * band(f.size.x, min_width, HEAD_MAX_SIDE_M, HEAD_SOFT_M)
+        * band(f.size.y, min_width, HEAD_MAX_SIDE_M, HEAD_SOFT_M)
 }
 
 /// The shape score of someone whose lower body something nearer hides, seen as a sliver

@@ -319,6 +319,36 @@ fn a_followed_person_may_shrink_to_a_flat_sliver_but_is_not_found_twice() {
     assert_eq!(found.len(), 1, "{found:#?}");
 }
 
+/// The lab's sitting person once the robot is close: their shoulders sunk behind the table, a
+/// head alone (0.2 m across and tall) where someone was confirmed is still them; alone it is
+/// no one, and the top 0.2 m of a lectern (0.6 x 0.35 m) is no head even there.
+#[test]
+fn a_followed_person_may_shrink_to_their_head_but_not_to_a_lectern_top() {
+    let head = |p: &mut Vec<WindowPoint>| cylinder(p, [3.0, 0.0], 0.1, [0.87, 1.07]);
+    let t = 1_000_000_000;
+    let mut alone = room(true);
+    head(&mut alone);
+    let fresh = detect_at(&mut GeometricDetector::new(DetectConfig::default()).unwrap(), alone.clone(), t);
+    assert!(fresh.is_empty(), "alone, a head-sized blob is no one: {fresh:#?}");
+
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let t = confirmed_crouching(&mut det);
+    let found = detect_at(&mut det, alone, t);
+    assert_eq!(found.len(), 1, "{found:#?}");
+    assert!((found[0].centre_m.x - 3.0).abs() < 0.15 && found[0].centre_m.y.abs() < 0.1);
+    assert_eq!(found[0].pose, PersonPose::Low);
+
+    let mut lectern = room(true);
+    for z in [0.87, 1.07] {
+        grid(&mut lectern, [2.9, 3.25], [-0.3, 0.3], 0.03, |x, v| [x, v, z]);
+    }
+    grid(&mut lectern, [-0.3, 0.3], [0.87, 1.07], 0.03, |v, h| [2.9, v, h]);
+    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let t = confirmed_crouching(&mut det);
+    let found = detect_at(&mut det, lectern, t);
+    assert!(found.is_empty(), "{found:#?}");
+}
+
 fn crouching_found(det: &mut GeometricDetector, walled: bool, t_ns: u64) -> bool {
     let points = crouching_scene(walled, t_ns);
     let w = DetectWindow { stamp: Stamp::new(t_ns, Clock::Ptp), ..window(&points) };
