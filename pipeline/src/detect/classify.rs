@@ -127,24 +127,27 @@ fn score_with(f: &ClusterFeatures, cfg: &DetectConfig, gates: ShapeGates) -> (Pe
 /// gates on size and place alone.
 fn upper_body(f: &ClusterFeatures, cfg: &DetectConfig, height_m: [f64; 2], min_width: f64) -> f64 {
     band(f.size.z, height_m[0], height_m[1], UPPER_HEIGHT_SOFT_M)
-        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
-        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+        * at_head_height(f, cfg)
         * band(f.size.x, MIN_LENGTH_M, 0.8, 0.1)
         * band(f.size.y, min_width, 0.7, 0.03)
 }
 
-/// A head is 0.2-0.25 m tall and at most about 0.25 m across either way.
+/// Floating (lowest point at least 0.45 m up) with its top where heads are (`upper_body_top_m`).
+fn at_head_height(f: &ClusterFeatures, cfg: &DetectConfig) -> f64 {
+    band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1) * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+}
+
+/// A head is 0.2-0.25 m tall and 0.15-0.25 m across; the gates leave 5 cm for a neck and range
+/// noise.
 const HEAD_HEIGHT_M: [f64; 2] = [0.15, 0.3];
 const HEAD_MAX_SIDE_M: f64 = 0.3;
 const HEAD_SOFT_M: f64 = 0.03;
 
-/// A head alone over a table edge or a seat back, where a person already followed was (its
-/// place and top are those of head and shoulders; it is no wider than a head, so no table top or
-/// lectern is taken for one).
+/// A head alone over a table edge or a seat back, where a person already followed was: no wider
+/// than a head either way, so no table top or lectern is taken for one.
 fn head_alone(f: &ClusterFeatures, cfg: &DetectConfig, min_width: f64) -> f64 {
     band(f.size.z, HEAD_HEIGHT_M[0], HEAD_HEIGHT_M[1], HEAD_SOFT_M)
-        * band(f.top_m, cfg.upper_body_top_m[0], cfg.upper_body_top_m[1], 0.1)
-        * band(f.bottom_m, 0.45, f64::MAX, 0.1)
+        * at_head_height(f, cfg)
         * band(f.size.x, min_width, HEAD_MAX_SIDE_M, HEAD_SOFT_M)
         * band(f.size.y, min_width, HEAD_MAX_SIDE_M, HEAD_SOFT_M)
 }
