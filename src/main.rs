@@ -44,6 +44,10 @@ enum Command {
     /// Simulate a scenario and run the see-through mission on it live: mock devices, the robot
     /// and rig nodes, the link on loopback; report.json, recordings, AR frames, plots.
     Sim(cmd::sim::Args),
+    /// Generate a building (flat, office, warehouse, hall, lab) as a scenario file.
+    Gen(cmd::gen::Args),
+    /// Run the mission on a range of generated buildings; eval.json, a summary and plots.
+    Eval(cmd::eval::Args),
     /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
     #[command(subcommand)]
     Ptp(cmd::ptp::Command),
@@ -80,6 +84,8 @@ fn main() -> ExitCode {
         Command::Replay(a) => cmd::replay::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Sim(a) => cmd::sim::run(a),
+        Command::Gen(a) => cmd::gen::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),
         Command::Base(c) => cmd::base::run(c),
         Command::Align(a) => cmd::align::run(a),

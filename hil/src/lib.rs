@@ -7,10 +7,13 @@
 //! - [`motors`]: DJI C620 ESCs or CiA 402 drives behind a mock slcan adapter on a pty.
 //! - [`imu`]: serial IMUs (MicroStrain MIP, WitMotion) on a pty, answering commands and
 //!   config writes, with injectable faults.
+//! - [`gen`]: generated buildings (flats, offices, warehouses, halls, labs) for held-out
+//!   evaluation, with routes planned on their floor plans.
 //! - [`rng`]: the small deterministic PRNG behind every seeded choice.
 
 pub mod avia;
 pub mod error;
+pub mod gen;
 pub mod imu;
 pub mod motors;
 pub mod rng;

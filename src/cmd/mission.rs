@@ -16,9 +16,9 @@
 
 use super::lio::peak_rss_mib;
 use super::mission_input::{self, Input, Side};
-use super::mission_score::{quantiles, summary, LatencyReport, MemoryReport, Scorer, Truth};
 use anyhow::{bail, Context};
 use nalgebra::Isometry3;
+use starc_eval::{quantiles, summary, LatencyReport, MemoryReport, Scorer, Truth};
 use starc_hil::sim::truth::tum_line;
 use starc_pipeline::ar::{CameraModel, RenderConfig};
 use starc_pipeline::mission::{
@@ -67,6 +67,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lidar_t_camera: truth.mount.lidar_t_camera,
         start: Start::FromTruth { hint_m: args.start_hint_m, hint_deg: args.start_hint_deg },
         start_gate_m: args.start_gate_m,
+        robot: RobotCoreConfig::default(),
         truth: Some(truth),
     };
     run_offline(inputs, run)
@@ -88,6 +89,8 @@ pub struct Offline {
     pub lidar_t_camera: Isometry3<f64>,
     pub start: Start,
     pub start_gate_m: f64,
+    /// The robot's core (its LIO, detector and the filters on what it sends).
+    pub robot: RobotCoreConfig,
     /// With the simulator's truth: the camera frames rendered and scored into report.json.
     /// Without: a frame after every rig scan, and replay.json with what needs no truth.
     pub truth: Option<Truth>,
@@ -103,7 +106,7 @@ struct ReplayReport {
     alignment_attempts: usize,
     alignment_accepted: usize,
     first_accepted_after_s: Option<f64>,
-    compute_ms: super::mission_score::Quantiles,
+    compute_ms: starc_eval::Quantiles,
     frames: usize,
     peak_rss_mib: Option<f64>,
     wall_s: f64,
@@ -115,7 +118,7 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
     std::fs::create_dir_all(out.join("ar")).with_context(|| format!("creating {}", out.display()))?;
     let mut score = run.truth.map(Scorer::new);
     let rig_cfg = RigCoreConfig { start_gate_m: run.start_gate_m, ..RigCoreConfig::default() };
-    let mut robot = RobotCore::new(RobotCoreConfig::default())?;
+    let mut robot = RobotCore::new(run.robot.clone())?;
     let mut rig = RigCore::new(rig_cfg)?;
     let mut overlay = Overlay::new(HOLD_NS);
     let (mut robot_tum, mut rig_tum, mut world_tum) = (Vec::new(), Vec::new(), Vec::new());

@@ -4,8 +4,10 @@ pub mod align;
 pub mod base;
 pub mod demo;
 pub mod devices;
+pub mod eval;
 pub mod export;
 pub mod fpv;
+pub mod gen;
 pub mod imu;
 pub mod inspect;
 pub mod lio;
@@ -13,8 +15,6 @@ pub mod lio_input;
 pub mod livox;
 pub mod mission;
 pub mod mission_input;
-mod mission_score;
-mod mission_truth;
 pub mod mock;
 pub mod ptp;
 pub mod rates;
@@ -22,7 +22,6 @@ pub mod replay;
 pub mod robot;
 pub mod sim;
 mod sim_live;
-mod svg_plot;
 
 /// The tokio runtime every async subcommand runs on; two workers match the target machines.
 pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {

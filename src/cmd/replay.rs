@@ -15,6 +15,7 @@ use starc_livox::capture::{self, Datagram};
 use starc_livox::control::RawFrame;
 use starc_livox::data::DataPacket;
 use starc_livox::ports::DEVICE_CMD_PORT;
+use starc_pipeline::mission::RobotCoreConfig;
 use starc_time::Stamp;
 use std::io::Write;
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
@@ -136,7 +137,7 @@ fn rerun(args: &Args) -> anyhow::Result<()> {
     let inputs = super::mission_input::from_recordings(&files)?;
     let run = match (&args.truth, &args.fpv_config) {
         (Some(dir), _) => {
-            let truth = super::mission_score::Truth::load(dir)?;
+            let truth = starc_eval::Truth::load(dir)?;
             Offline {
                 out,
                 frames_every: args.frames_every,
@@ -144,6 +145,7 @@ fn rerun(args: &Args) -> anyhow::Result<()> {
                 lidar_t_camera: truth.mount.lidar_t_camera,
                 start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
                 start_gate_m: 2.0,
+                robot: RobotCoreConfig::default(),
                 truth: Some(truth),
             }
         }
@@ -168,6 +170,7 @@ fn rerun(args: &Args) -> anyhow::Result<()> {
                         .map_or_else(nalgebra::Isometry3::identity, |s| s.isometry()),
                 ),
                 start_gate_m: cfg.as_ref().map_or(2.0, |c| c.start_gate_m),
+                robot: RobotCoreConfig::default(),
                 truth: None,
             }
         }

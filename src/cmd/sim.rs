@@ -63,6 +63,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let (scenario, text) = Scenario::load(&args.scenario)?;
+    let blocked = starc_hil::sim::route_check::check_routes(&scenario);
+    if !blocked.is_empty() {
+        let lines: Vec<String> = blocked.iter().map(|v| format!("  {v}")).collect();
+        anyhow::bail!("{}: a route runs into something:\n{}", args.scenario, lines.join("\n"));
+    }
     let opts = SimOptions {
         out: args.out.clone(),
         duration_s: args.duration,
@@ -129,8 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let opts = super::sim_live::LiveOptions {
             out: args.out.join("mission"),
             frames_every: args.frames_every,
-            start_hint_m: 1.0,
-            start_hint_deg: 20.0,
+            start_hint: Some((1.0, 20.0)),
             start_gate_m: 2.0,
             view: crate::view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
         };

@@ -6,12 +6,12 @@
 
 use super::lio::peak_rss_mib;
 use super::mission::{FPV_AVIA, ROBOT_AVIA};
-use super::mission_score::{summary, LatencyReport, MemoryReport, Scorer, Truth};
 use crate::node::config::{CameraMountConfig, FpvNodeConfig, RobotNodeConfig, StartPose};
 use crate::node::fpv::{self, FpvEvent};
 use crate::node::robot::{self, RobotEvent};
 use anyhow::{bail, Context};
 use nalgebra::{Isometry3, UnitQuaternion};
+use starc_eval::{summary, LatencyReport, MemoryReport, Scorer, Truth};
 use starc_hil::avia::{CaptureSource, MockAvia, MockAviaConfig};
 use starc_hil::sim::truth::tum_line;
 use starc_link::LinkConfig;
@@ -38,8 +38,11 @@ const RIG_DRAIN: Duration = Duration::from_millis(300);
 pub struct LiveOptions {
     pub out: PathBuf,
     pub frames_every: u64,
-    pub start_hint_m: f64,
-    pub start_hint_deg: f64,
+    /// The rig's expected start from the truth: its true start moved this far (m) and turned
+    /// this much (deg), gated at `start_gate_m` (`starc sim`). `None`: nothing from the truth
+    /// reaches the rig node; it is seeded at the robot's map origin with no gate.
+    pub start_hint: Option<(f64, f64)>,
+    /// With a hint: a first alignment farther than this from it is refused.
     pub start_gate_m: f64,
     /// The rig node's live views (browser, Foxglove) while the mission runs.
     pub view: crate::view::ViewConfig,
@@ -116,16 +119,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let camera = score.truth.mount.camera.clone();
     let lidar_t_camera = score.truth.mount.lidar_t_camera;
 
-    // The robot's LIO world is gravity-aligned at its start with yaw zero: the expected start
-    // of the responder in it, for the rig's config, from the truth (then moved by the hint).
-    let gt0 = score.truth.gt_robot.first().map(|g| g.1).unwrap_or_else(Isometry3::identity);
-    let (roll, pitch, _) = gt0.rotation.euler_angles();
-    let lio_t_world_guess =
-        Isometry3::from_parts(Default::default(), UnitQuaternion::from_euler_angles(roll, pitch, 0.0)) * gt0.inverse();
-    let fpv_t0 = score.truth.gt_fpv.first().map_or(s0, |g| g.0);
-    let hint = score.truth.start_hint(&lio_t_world_guess, fpv_t0, opts.start_hint_m, opts.start_hint_deg);
-    let (_, _, hint_yaw) = hint.rotation.euler_angles();
-    let t = hint.translation.vector;
+    let (expected_start, start_gate_m) = rig_start(&score.truth, s0, opts);
 
     let mut ports = FreePorts::default();
     let (robot_bcast, fpv_bcast, link_port) = (ports.udp()?, ports.udp()?, ports.tcp()?);
@@ -149,8 +143,8 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
             translation_m: [c.x, c.y, c.z],
             quaternion_xyzw: [q.i, q.j, q.k, q.w],
         },
-        expected_start: Some(StartPose { position_m: [t.x, t.y, t.z], yaw_deg: hint_yaw.to_degrees() }),
-        start_gate_m: opts.start_gate_m,
+        expected_start,
+        start_gate_m,
         shared_lidar_clock: true,
         view: opts.view.clone(),
         record: Some(opts.out.join("fpv.mcap")),
@@ -240,7 +234,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
             if robot_tum.is_empty() { "robot poses" } else { "rig scans" }
         );
     }
-    let dq = super::mission_score::quantiles(&detect_ms);
+    let dq = starc_eval::quantiles(&detect_ms);
     tracing::info!(p50_ms = dq.p50, p99_ms = dq.p99, "robot node: person detection compute per window");
     let latency = LatencyReport::from_parts(&slam, &comm, &viz, &total);
     let memory = MemoryReport {
@@ -272,6 +266,23 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         opts.out.display()
     )?;
     Ok(())
+}
+
+/// The rig node's `expected_start` and `start_gate_m`: with a hint, the truth's start of the
+/// rig moved by it, gated; without one, none and no gate (the node seeds at the map's origin).
+fn rig_start(truth: &Truth, s0: u64, opts: &LiveOptions) -> (Option<StartPose>, f64) {
+    let Some((hint_m, hint_deg)) = opts.start_hint else { return (None, f64::INFINITY) };
+    // The robot's LIO world is gravity-aligned at its start with yaw zero: the expected start
+    // of the responder in it, from the truth (then moved by the hint).
+    let gt0 = truth.gt_robot.first().map(|g| g.1).unwrap_or_else(Isometry3::identity);
+    let (roll, pitch, _) = gt0.rotation.euler_angles();
+    let lio_t_world_guess =
+        Isometry3::from_parts(Default::default(), UnitQuaternion::from_euler_angles(roll, pitch, 0.0)) * gt0.inverse();
+    let fpv_t0 = truth.gt_fpv.first().map_or(s0, |g| g.0);
+    let hint = truth.start_hint(&lio_t_world_guess, fpv_t0, hint_m, hint_deg);
+    let (_, _, hint_yaw) = hint.rotation.euler_angles();
+    let t = hint.translation.vector;
+    (Some(StartPose { position_m: [t.x, t.y, t.z], yaw_deg: hint_yaw.to_degrees() }), opts.start_gate_m)
 }
 
 /// What the harness hears from the nodes while they run, scored as it comes.
@@ -343,7 +354,7 @@ impl Tally {
                         let keep = (self.frames_every > 0 && index.is_multiple_of(self.frames_every))
                             .then_some(self.png_dir.as_path());
                         if let Err(e) = score.frame(&f, &view, render_ms, keep) {
-                            self.scoring_error.get_or_insert(e);
+                            self.scoring_error.get_or_insert(e.into());
                         }
                     }
                 }
@@ -365,7 +376,54 @@ impl Tally {
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
-    use super::FreePorts;
+    use super::{rig_start, FreePorts, LiveOptions};
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+    use starc_eval::{CameraMount, Truth};
+
+    fn truth() -> Truth {
+        let pose = |x: f64, y: f64, yaw_deg: f64| {
+            Isometry3::from_parts(
+                Translation3::new(x, y, 1.0),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_deg.to_radians()),
+            )
+        };
+        Truth {
+            dir: Default::default(),
+            scenario: "synthetic".into(),
+            // The robot faces +y; the rig starts 1 m behind it.
+            gt_robot: vec![(0, pose(0.0, 2.0, 90.0)), (1_000_000_000, pose(0.0, 3.0, 90.0))],
+            gt_fpv: vec![(0, pose(0.0, 1.0, 90.0)), (1_000_000_000, pose(0.0, 1.0, 90.0))],
+            people: Vec::new(),
+            frames: Vec::new(),
+            mount: CameraMount { camera: Default::default(), lidar_t_camera: Isometry3::identity() },
+            robot_returns: None,
+        }
+    }
+
+    fn options(start_hint: Option<(f64, f64)>) -> LiveOptions {
+        LiveOptions {
+            out: Default::default(),
+            frames_every: 0,
+            start_hint,
+            start_gate_m: 2.0,
+            view: Default::default(),
+        }
+    }
+
+    #[test]
+    fn without_a_hint_nothing_from_the_truth_reaches_the_rig() {
+        let (start, gate_m) = rig_start(&truth(), 0, &options(None));
+        assert!(start.is_none());
+        assert_eq!(gate_m, f64::INFINITY);
+        // With one, the rig's true start in the robot's LIO world (x forward from the robot's
+        // start: 1 m behind it is x = -1), moved 0.8 m x, -0.6 m y and turned 20 deg, gated.
+        let (start, gate_m) = rig_start(&truth(), 0, &options(Some((1.0, 20.0))));
+        let start = start.unwrap();
+        assert_eq!(gate_m, 2.0);
+        let [x, y, z] = start.position_m;
+        assert!((x + 0.2).abs() < 1e-9 && (y + 0.6).abs() < 1e-9 && z.abs() < 1e-9, "{:?}", start.position_m);
+        assert!((start.yaw_deg - 20.0).abs() < 1e-9, "{}", start.yaw_deg);
+    }
 
     #[test]
     fn free_ports_are_never_handed_out_twice() {

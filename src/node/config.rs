@@ -99,7 +99,8 @@ pub struct FpvNodeConfig {
     /// where the robot started).
     #[serde(default)]
     pub expected_start: Option<StartPose>,
-    /// A first alignment farther than this from the expected start is refused.
+    /// A first alignment farther than this from the expected start is refused; `inf` (TOML
+    /// `start_gate_m = inf`): no gate, any first alignment is taken.
     #[serde(default = "default_start_gate_m")]
     pub start_gate_m: f64,
     /// Both LiDARs on one PTP clock (the robot's grandmaster): detections are placed in time by
@@ -169,6 +170,20 @@ impl RobotNodeConfig {
 }
 
 impl FpvNodeConfig {
+    /// What the types let through but the node cannot use: a start gate that is not a positive
+    /// distance or `inf` (no gate).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.start_gate_m.is_nan() || self.start_gate_m <= 0.0 {
+            anyhow::bail!("start_gate_m must be a positive distance, or inf for no gate (got {})", self.start_gate_m);
+        }
+        Ok(())
+    }
+
+    /// Whether a first alignment anywhere is taken (`start_gate_m = inf`).
+    pub fn no_start_gate(&self) -> bool {
+        self.start_gate_m == f64::INFINITY
+    }
+
     /// Relative paths in the file are relative to the file.
     pub fn resolve_paths(&mut self, config: &Path) {
         rel(config, &mut self.lio);
@@ -242,6 +257,28 @@ mod tests {
         assert!((t.rotation * nalgebra::Vector3::z() - nalgebra::Vector3::x()).norm() < 1e-9);
         assert!(fpv.expected_start.is_some() && fpv.shared_lidar_clock);
         assert!(robot.record.is_none() && fpv.record.is_none() && fpv.view.http_bind.is_none());
+    }
+
+    #[test]
+    fn no_expected_start_and_no_gate_load_and_validate() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fpv.toml");
+        let camera = "[camera]\nwidth = 640\nheight = 480\nfx = 460.0\nfy = 460.0\ncx = 320.0\ncy = 240.0\n\
+                      translation_m = [0.0, 0.0, 0.05]\nquaternion_xyzw = [0.0, 0.0, 0.0, 1.0]\n[link]\n";
+        std::fs::write(&path, format!("start_gate_m = inf\n{camera}")).unwrap();
+        let cfg: FpvNodeConfig = load(&path).unwrap();
+        cfg.validate().unwrap();
+        assert!(cfg.expected_start.is_none() && cfg.no_start_gate());
+        // Absent, the gate is 2 m; NaN, zero or negative it is an error.
+        std::fs::write(&path, camera).unwrap();
+        let cfg: FpvNodeConfig = load(&path).unwrap();
+        assert_eq!(cfg.start_gate_m, 2.0);
+        assert!(!cfg.no_start_gate());
+        for bad in ["nan", "0.0", "-1.0"] {
+            std::fs::write(&path, format!("start_gate_m = {bad}\n{camera}")).unwrap();
+            let e = load::<FpvNodeConfig>(&path).unwrap().validate().unwrap_err();
+            assert!(e.to_string().contains("start_gate_m"), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -86,6 +86,7 @@ pub async fn run(
     schedule: Vec<(u64, u64)>,
     watch: Option<mpsc::UnboundedSender<FpvEvent>>,
 ) -> anyhow::Result<FpvSummary> {
+    cfg.validate()?;
     let camera = cfg.camera.model.clone();
     camera.validate().map_err(|e| anyhow::anyhow!("[camera]: {e}"))?;
     let lidar_t_camera = cfg.camera.lidar_t_camera()?;
@@ -97,6 +98,9 @@ pub async fn run(
     };
     let mut core = RigCore::new(core_cfg)?;
     core.set_start_hint(cfg.expected_start.map_or_else(Isometry3::identity, |s| s.isometry()));
+    if cfg.no_start_gate() {
+        tracing::info!("no start gate: the first alignment is taken wherever it lands");
+    }
     let mut overlay = Overlay::new(HOLD_NS);
     let mut tiles = TileMap::default();
     let mut tiles_changed = false;

@@ -2,7 +2,8 @@
 //! a swing of the legs and arms.
 //!
 //! Person frame: origin on the floor between the feet (the pelvis for someone lying), x the way
-//! they face, z up. Joint heights are those of a 1.75 m adult, scaled by height.
+//! they face, z up. Joint heights are those of a 1.75 m adult, scaled by height; a build other
+//! than 1 scales the widths (across the body, and every radius) but not the height.
 
 use crate::sim::scenario::PoseKind;
 use crate::sim::shapes::{Aabb, Capsule, Hit, V3};
@@ -108,13 +109,24 @@ pub struct Body {
 }
 
 impl Body {
-    /// Poses a person: `at` the frame origin on the floor, `yaw_rad` the heading.
+    /// Poses a person of average build: `at` the frame origin on the floor, `yaw_rad` the heading.
     pub fn new(label: u16, pose: PoseKind, height_m: f64, at: V3, yaw_rad: f64, swing: f64) -> Self {
+        Self::with_build(label, pose, height_m, 1.0, at, yaw_rad, swing)
+    }
+
+    /// As [`Body::new`], `build` times as wide (0.7 slight .. 1.4 heavy). A build of exactly 1
+    /// multiplies by one, so it poses the same body, to the bit, as [`Body::new`] always did.
+    pub fn with_build(label: u16, pose: PoseKind, height_m: f64, build: f64, at: V3, yaw_rad: f64, swing: f64) -> Self {
         let s = skeleton(pose, swing.clamp(-1.0, 1.0));
         let k = height_m / REFERENCE_HEIGHT_M;
         let (sin, cos) = yaw_rad.sin_cos();
-        let place = |p: V3| at + V3::new(k * (cos * p.x - sin * p.y), k * (sin * p.x + cos * p.y), k * p.z);
-        let limb = |a: V3, b: V3, r: f64, albedo: f32| Capsule { a: place(a), b: place(b), radius: r * k, albedo };
+        // y runs across the body in every pose (lying too: on the back, head along x).
+        let place = |p: V3| {
+            let y = p.y * build;
+            at + V3::new(k * (cos * p.x - sin * y), k * (sin * p.x + cos * y), k * p.z)
+        };
+        let limb =
+            |a: V3, b: V3, r: f64, albedo: f32| Capsule { a: place(a), b: place(b), radius: r * k * build, albedo };
         let torso_side = |y: f64| {
             let o = v(0.0, y, 0.0);
             limb(s.pelvis + o, s.neck + o - (s.neck - s.pelvis) * 0.08, 0.12, CLOTHING_ALBEDO)
@@ -184,6 +196,33 @@ mod tests {
         // A stride moves the feet apart along the heading.
         let stride = Body::new(1, PoseKind::Standing, 1.75, V3::zeros(), 0.0, 1.0);
         assert!(stride.box_size.x > standing.box_size.x + 0.2);
+    }
+
+    #[test]
+    fn build_scales_widths_not_height() {
+        let at = V3::new(2.0, 3.0, 0.0);
+        for pose in [PoseKind::Standing, PoseKind::Sitting, PoseKind::Crouching, PoseKind::Lying] {
+            let base = Body::new(1, pose, 1.75, at, 0.4, 0.3);
+            let same = Body::with_build(1, pose, 1.75, 1.0, at, 0.4, 0.3);
+            assert_eq!(
+                (&base.capsules, base.box_size, base.box_centre),
+                (&same.capsules, same.box_size, same.box_centre)
+            );
+            let heavy = Body::with_build(1, pose, 1.75, 1.3, at, 0.4, 0.3);
+            let slight = Body::with_build(1, pose, 1.75, 0.75, at, 0.4, 0.3);
+            // Across the body (y): wider and narrower.
+            assert!(heavy.box_size.y > base.box_size.y * 1.2 && slight.box_size.y < base.box_size.y * 0.8, "{pose:?}");
+            for (b, r) in [(&heavy, 1.3), (&slight, 0.75)] {
+                let radii = b.capsules.iter().zip(&base.capsules).all(|(c, d)| (c.radius - d.radius * r).abs() < 1e-12);
+                assert!(radii, "{pose:?}");
+            }
+        }
+        // Height: the head's top stays within its grown radius of where it was.
+        let base = Body::new(1, PoseKind::Standing, 1.75, at, 0.0, 0.0);
+        let heavy = Body::with_build(1, PoseKind::Standing, 1.75, 1.4, at, 0.0, 0.0);
+        let head = |b: &Body| b.capsules[0].a.z;
+        assert_eq!(head(&base), head(&heavy));
+        assert!(heavy.bounds.max.z - base.bounds.max.z < 0.4 * 0.105 + 1e-9);
     }
 
     #[test]

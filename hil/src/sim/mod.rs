@@ -9,13 +9,18 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod clutter;
 pub mod devices;
+pub mod furniture;
 pub mod human;
 pub mod imu;
 pub mod lan;
 pub mod lidar;
 pub mod motion;
+pub mod obstacles;
 pub mod pattern;
+pub mod plan_svg;
+pub mod route_check;
 pub mod run;
 pub mod scenario;
 pub mod shapes;

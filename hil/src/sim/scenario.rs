@@ -5,6 +5,7 @@
 //! floor says otherwise); angles are degrees in the file.
 
 use crate::error::{HilError, Result};
+pub use crate::sim::furniture::{Furniture, FurnitureKind};
 use serde::Deserialize;
 use std::ops::Range;
 use toml::Spanned;
@@ -39,6 +40,9 @@ pub struct Scenario {
     pub boxes: Vec<Spanned<BoxItem>>,
     #[serde(default)]
     pub clutter: Vec<Spanned<Clutter>>,
+    /// Furniture by kind (chairs, racks, coat stands...), each expanded into its parts.
+    #[serde(default)]
+    pub furniture: Vec<Spanned<Furniture>>,
     #[serde(default)]
     pub people: Vec<Spanned<Person>>,
     pub robot: Spanned<Robot>,
@@ -219,6 +223,10 @@ pub struct Person {
     pub yaw_deg: f64,
     #[serde(default = "default_height")]
     pub height_m: f64,
+    /// Build: scales the body's widths (limb and torso radii, shoulders and hips apart), not its
+    /// height; 1 is the average adult, 0.7..=1.4.
+    #[serde(default = "default_build")]
+    pub build: f64,
     /// Walks from `at` through these points (only when standing).
     #[serde(default)]
     pub path: Vec<[f64; 2]>,
@@ -231,6 +239,9 @@ pub struct Person {
 
 fn default_height() -> f64 {
     1.75
+}
+fn default_build() -> f64 {
+    1.0
 }
 fn default_walk_speed() -> f64 {
     1.0
@@ -492,6 +503,8 @@ pub fn builtin_albedo(material: &str) -> Option<f64> {
         "metal" => 0.6,
         "fabric" => 0.2,
         "cardboard" => 0.5,
+        "plastic" => 0.5,
+        "foliage" => 0.25,
         "floor_tile" => 0.4,
         "carpet" => 0.15,
         "ceiling_tile" => 0.8,
@@ -624,6 +637,13 @@ impl Scenario {
             }
             material(&span, &c.material)?;
         }
+        for f in &self.furniture {
+            let (span, f) = (f.span(), f.get_ref());
+            f.check().map_err(|reason| fail(span.clone(), format!("furniture {reason}")))?;
+            for m in f.materials() {
+                material(&span, m)?;
+            }
+        }
         if self.people.len() > 250 {
             return Err(fail(0..0, "at most 250 people (mask values are one byte)".into()));
         }
@@ -631,6 +651,9 @@ impl Scenario {
             let (span, p) = (p.span(), p.get_ref());
             if !(0.5..=2.5).contains(&p.height_m) {
                 return Err(fail(span, format!("height_m {} is not a person's", p.height_m)));
+            }
+            if !(0.7..=1.4).contains(&p.build) {
+                return Err(fail(span, format!("build {} must be in 0.7..=1.4", p.build)));
             }
             if !p.path.is_empty() && p.pose != PoseKind::Standing {
                 return Err(fail(span, "only a standing person walks a path".into()));
@@ -720,5 +743,33 @@ mod tests {
         assert!(error_of(&mat).contains("line 6") && error_of(&mat).contains("unobtainium"), "{}", error_of(&mat));
         let walker = format!("{MINIMAL}[[people]]\nname = \"a\"\nat = [1, 1]\npose = \"lying\"\npath = [[2, 2]]\n");
         assert!(error_of(&walker).contains("only a standing person"), "{}", error_of(&walker));
+        let build = format!("{MINIMAL}[[people]]\nname = \"a\"\nat = [1, 1]\nbuild = 1.6\n");
+        assert!(error_of(&build).contains("line 6") && error_of(&build).contains("build"), "{}", error_of(&build));
+    }
+
+    #[test]
+    fn furniture_table() {
+        let ok = format!(
+            "{MINIMAL}[[furniture]]\nkind = \"chair\"\nat = [1, 2]\n\n[[furniture]]\nkind = \"rack\"\nat = [5, 2]\n\
+             yaw_deg = 90\nbase_z_m = 0.2\nsize_m = [2.0, 1.0, 3.0]\nmaterial = \"wood\"\nname = \"r1\"\n"
+        );
+        let s = Scenario::parse(&ok, "t.toml");
+        let s = match s {
+            Ok(s) => s,
+            Err(e) => panic!("{e}"),
+        };
+        let f: Vec<&Furniture> = s.furniture.iter().map(|f| f.get_ref()).collect();
+        assert_eq!((f[0].kind, f[0].size_m(), f[0].material()), (FurnitureKind::Chair, [0.45, 0.45, 0.9], "wood"));
+        assert_eq!((f[1].kind, f[1].size_m(), f[1].label()), (FurnitureKind::Rack, [2.0, 1.0, 3.0], "r1".into()));
+        assert_eq!(s.people.len(), 0);
+        let unknown = format!("{MINIMAL}[[furniture]]\nkind = \"throne\"\nat = [1, 1]\n");
+        let e = error_of(&unknown);
+        assert!(e.contains("line 7") && e.contains("throne") && e.contains("coat_stand"), "{e}");
+        let size = format!("{MINIMAL}[[furniture]]\nkind = \"table\"\nat = [1, 1]\nsize_m = [1, -1, 1]\n");
+        assert!(error_of(&size).contains("line 6") && error_of(&size).contains("width"), "{}", error_of(&size));
+        let mat = format!("{MINIMAL}[[furniture]]\nkind = \"table\"\nat = [1, 1]\nmaterial = \"jade\"\n");
+        assert!(error_of(&mat).contains("line 6") && error_of(&mat).contains("jade"), "{}", error_of(&mat));
+        let key = format!("{MINIMAL}[[furniture]]\nkind = \"table\"\nat = [1, 1]\ncolour = \"red\"\n");
+        assert!(error_of(&key).contains("colour"), "{}", error_of(&key));
     }
 }

@@ -1,12 +1,12 @@
-//! The scene a scenario describes, as solids: the building's boxes in a BVH and the people posed
-//! at any instant; one ray-casting entry point for the LiDARs and the camera.
+//! The scene a scenario describes, as solids: the building's boxes, cylinders and capsules
+//! (walls, floors, boxes, clutter, furniture) in a BVH and the people posed at any instant; one
+//! ray-casting entry point for the LiDARs and the camera.
 
-use crate::rng::{hash2, SplitMix64};
 use crate::sim::bvh::Bvh;
 use crate::sim::human::Body;
 use crate::sim::motion::PersonMotion;
 use crate::sim::scenario::{DoorState, PoseKind, Scenario};
-use crate::sim::shapes::{Hit, YawBox, V3};
+use crate::sim::shapes::{Hit, Solid, YawBox, V3};
 
 /// Thickness of floor and ceiling slabs.
 const SLAB_M: f64 = 0.2;
@@ -20,6 +20,8 @@ pub struct PersonModel {
     pub name: String,
     pub pose: PoseKind,
     pub height_m: f64,
+    /// Width scale of the body (1 = average).
+    pub build: f64,
     pub base_z_m: f64,
     pub motion: PersonMotion,
 }
@@ -27,7 +29,8 @@ pub struct PersonModel {
 impl PersonModel {
     pub fn body_at(&self, t: f64) -> Body {
         let (x, y, yaw, swing) = self.motion.at(t);
-        Body::new(self.label, self.pose, self.height_m, V3::new(x, y, self.base_z_m), yaw, swing)
+        let at = V3::new(x, y, self.base_z_m);
+        Body::with_build(self.label, self.pose, self.height_m, self.build, at, yaw, swing)
     }
 }
 
@@ -119,17 +122,11 @@ impl World {
                 boxes.push(YawBox::new(centre, V3::from(b.size_m), b.yaw_deg.to_radians(), albedo(&b.material)));
             }
         }
-        for (ci, c) in s.clutter.iter().enumerate() {
-            let c = c.get_ref();
-            let mut rng = SplitMix64::new(hash2(c.seed, ci as u64));
-            for _ in 0..c.count {
-                let mut size = || c.size_min_m + rng.next_f64() * (c.size_max_m - c.size_min_m);
-                let (l, w, h) = (size(), size(), size());
-                let x = c.min[0] + rng.next_f64() * (c.max[0] - c.min[0]);
-                let y = c.min[1] + rng.next_f64() * (c.max[1] - c.min[1]);
-                let yaw = rng.next_f64() * std::f64::consts::PI;
-                boxes.push(YawBox::new(V3::new(x, y, h / 2.0), V3::new(l, w, h), yaw, albedo(&c.material)));
-            }
+        for item in crate::sim::clutter::placed(s) {
+            let [x, y] = item.centre;
+            let [l, w, h] = item.size_m;
+            let material = s.clutter.get(item.table).map_or("cardboard", |c| c.get_ref().material.as_str());
+            boxes.push(YawBox::new(V3::new(x, y, h / 2.0), V3::new(l, w, h), item.yaw_rad, albedo(material)));
         }
         let people = s
             .people
@@ -142,12 +139,18 @@ impl World {
                     name: p.name.clone(),
                     pose: p.pose,
                     height_m: p.height_m,
+                    build: p.build,
                     base_z_m: p.base_z_m,
                     motion: PersonMotion::new(p),
                 }
             })
             .collect();
-        Self { building: Bvh::build(boxes), people }
+        // Furniture after every box, so a scene without any builds the tree it always did.
+        let mut solids: Vec<Solid> = boxes.into_iter().map(Solid::Box).collect();
+        for f in &s.furniture {
+            solids.extend(f.get_ref().solids(albedo));
+        }
+        Self { building: Bvh::build(solids), people }
     }
 
     /// Everyone posed at time `t` (s).
@@ -235,5 +238,47 @@ waypoints = [[1, 1]]
         // The person seen through the wall beside the open door.
         let d = (V3::new(8.0, 0.1, 1.2) - o).normalize();
         assert!(World::cast_people(&o, &d, 100.0, &bodies).is_some());
+    }
+    #[test]
+    fn table_top_legs_and_a_pillar() {
+        let text = r#"
+name = "t"
+[[floors]]
+min = [-10, -10]
+max = [10, 10]
+[[furniture]]
+kind = "table"
+at = [3, 0]
+[[furniture]]
+kind = "pillar"
+at = [-4, 2]
+size_m = [0.5, 0.5, 3.0]
+[robot]
+waypoints = [[0, 0, 0]]
+[responder]
+waypoints = [[1, 1]]
+"#;
+        let world = match Scenario::parse(text, "t") {
+            Ok(s) => World::new(&s),
+            Err(e) => panic!("{e}"),
+        };
+        let down = -V3::z();
+        // From above onto the 0.75 m top, wood albedo.
+        let hit = world.cast(&V3::new(3.2, 0.1, 2.0), &down, 10.0, &[]).map(|h| (h.t, h.albedo, h.normal));
+        assert!(matches!(hit, Some((t, a, n)) if (t - 1.25).abs() < 1e-9 && a == 0.45 && n == V3::z()), "{hit:?}");
+        // Below the top, between the legs (1.4 x 0.8 m table): through to the floor at z = 0.
+        let hit = world.cast(&V3::new(3.0, 0.0, 0.5), &down, 10.0, &[]).map(|h| h.t);
+        assert!(matches!(hit, Some(t) if (t - 0.5).abs() < 1e-9), "{hit:?}");
+        // A leg near a corner (legs 5 cm square, 4 cm in from the edges).
+        let hit = world.cast(&V3::new(3.0 + 0.7 - 0.065, -1.0, 0.5), &V3::y(), 10.0, &[]).map(|h| h.t);
+        assert!(matches!(hit, Some(t) if (t - (1.0 - 0.4 + 0.04)).abs() < 1e-9), "{hit:?}");
+        let hit = world.cast(&V3::new(3.0, -1.0, 0.5), &V3::y(), 10.0, &[]);
+        assert!(hit.is_none(), "{hit:?}");
+        // The pillar's curved side: off its axis by 0.15 m, the 0.25 m radius is 0.2 m nearer.
+        let o = V3::new(0.0, 2.15, 1.5);
+        let hit = world.cast(&o, &-V3::x(), 10.0, &[]).map(|h| (h.t, h.normal));
+        let n = V3::new(0.8, 0.6, 0.0);
+        assert!(matches!(hit, Some((t, m)) if (t - 3.8).abs() < 1e-9 && (m - n).norm() < 1e-9), "{hit:?}");
+        assert_eq!(world.building.len(), 1 + 5 + 1);
     }
 }

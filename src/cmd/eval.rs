@@ -1,0 +1,237 @@
+//! `starc eval --seeds A..B [--family F] [--offline] --out DIR`: the whole mission on each
+//! generated building of a seed range, one row per building in DIR/eval.json with every figure
+//! of its report.json, a summary (median, p10, p90) per figure per family and over all, and a
+//! plot per figure. Seeds from 1000 up are the held-out test set (docs/eval.md).
+//!
+//! No truth reaches the pipeline unless `--hint truth` says so: the rig's first alignment is
+//! seeded at the world origin with no gate, as a responder who enters anywhere would be.
+
+use super::mission::{run_offline, Offline, Start};
+use super::mission_input;
+use anyhow::{bail, Context};
+use nalgebra::Isometry3;
+use starc_eval::batch::{flatten, print_summary, summarize, write_plots, Row};
+use starc_hil::gen;
+use starc_hil::sim::run::{run as run_sim, SimOptions};
+use starc_pipeline::mission::RobotCoreConfig;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Seeds, both ends included (`1000..1023` is 24 buildings). 1000 and up: the test set.
+    #[arg(long)]
+    seeds: SeedRange,
+    /// flat, office, warehouse, hall, lab, or any (each seed's own family).
+    #[arg(long, default_value = "any")]
+    family: super::gen::FamilyChoice,
+    /// Run the mission offline, in this process (fast); without it, live: mock devices, both
+    /// nodes and the link, at the real pace.
+    #[arg(long)]
+    offline: bool,
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed the rig's first alignment from the simulator's truth (`truth`: its true start moved
+    /// 1 m and 20 deg, gated at 2 m), as `starc sim` does. `none` (the default) is the scored
+    /// setting: no truth in the loop.
+    #[arg(long, default_value = "none")]
+    hint: Hint,
+    /// Keep each building's pcap, point labels and camera masks (about 250 MB per 30 s); by
+    /// default only the scenario, the truth's small files, the reports, the trajectories and the
+    /// plots stay.
+    #[arg(long)]
+    keep: bool,
+    /// Write every Nth AR frame as PNG (0: none).
+    #[arg(long, default_value_t = 0)]
+    frames_every: u64,
+    /// Draw a walker only from this height above the floor up (the robot core's
+    /// `walker_min_height_m`; 0 draws their legs too): to measure what leaving out a walker's
+    /// swinging shins costs and gains on every overlay metric. Offline only.
+    #[arg(long)]
+    walker_min_height_m: Option<f64>,
+    /// Cut each run at this many simulated seconds (smoke tests; such figures are not the
+    /// building's: the responder may not have arrived).
+    #[arg(long)]
+    max_duration: Option<f64>,
+}
+
+/// An inclusive range of seeds.
+#[derive(Clone, Copy, Debug)]
+pub struct SeedRange {
+    pub first: u64,
+    pub last: u64,
+}
+
+impl std::str::FromStr for SeedRange {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let parse = |v: &str| v.trim().parse::<u64>().map_err(|e| format!("{v:?}: {e}"));
+        let (first, last) = match s.split_once("..") {
+            Some((a, b)) => (parse(a)?, parse(b.trim_start_matches('='))?),
+            None => (parse(s)?, parse(s)?),
+        };
+        if last < first || last - first >= 10_000 {
+            return Err(format!("{s}: want A..B with A <= B and at most 10000 seeds"));
+        }
+        Ok(SeedRange { first, last })
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Hint {
+    None,
+    Truth,
+}
+
+#[derive(serde::Serialize)]
+struct EvalFile<'a> {
+    seeds: [u64; 2],
+    max_duration_s: Option<f64>,
+    walker_min_height_m: f64,
+    test_set: bool,
+    family: String,
+    mode: &'static str,
+    hint: Hint,
+    wall_s: f64,
+    buildings: usize,
+    failed: usize,
+    rows: &'a [Row],
+    summary: serde_json::Value,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let SeedRange { first, last } = args.seeds;
+    if args.walker_min_height_m.is_some() && !args.offline {
+        bail!("--walker-min-height-m is for offline runs (the live robot node takes its core's defaults)");
+    }
+    if first < gen::TEST_SEEDS_FROM && last >= gen::TEST_SEEDS_FROM {
+        bail!("--seeds {first}..{last} mixes development seeds (below 1000) with test seeds: run them apart");
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let started = Instant::now();
+    let total = (last - first + 1) as usize;
+    let mut rows = Vec::with_capacity(total);
+    for (i, seed) in (first..=last).enumerate() {
+        let t0 = Instant::now();
+        let row = one_building(&args, seed).unwrap_or_else(|e| Row::failed(seed, args.family.0, &format!("{e:#}")));
+        progress(i + 1, total, &row, t0.elapsed().as_secs_f64(), started.elapsed().as_secs_f64());
+        rows.push(row);
+    }
+    let summary = summarize(&rows);
+    let file = EvalFile {
+        seeds: [first, last],
+        max_duration_s: args.max_duration,
+        walker_min_height_m: robot_config(&args).walker_min_height_m,
+        test_set: gen::is_test_seed(first),
+        family: args.family.0.map_or_else(|| "any".to_string(), |f| f.to_string()),
+        mode: if args.offline { "offline" } else { "live" },
+        hint: args.hint,
+        wall_s: started.elapsed().as_secs_f64(),
+        buildings: rows.len(),
+        failed: rows.iter().filter(|r| r.error.is_some()).count(),
+        rows: &rows,
+        summary,
+    };
+    let path = args.out.join("eval.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&file)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    let plots = write_plots(&rows, &args.out.join("plots"))?;
+    println!(
+        "{} buildings ({} failed) in {:.0} s; wrote {} and {plots} plots",
+        file.buildings,
+        file.failed,
+        file.wall_s,
+        path.display()
+    );
+    print_summary(&file.summary);
+    Ok(())
+}
+
+fn progress(done: usize, total: usize, row: &Row, took_s: f64, elapsed_s: f64) {
+    let eta = elapsed_s / done as f64 * (total - done) as f64;
+    let what = match &row.error {
+        Some(e) => format!("failed: {}", e.lines().next().unwrap_or("")),
+        None => row.headline(),
+    };
+    eprintln!("[{done}/{total}] {}-{} {took_s:.0} s, eta {eta:.0} s: {what}", row.family, row.seed);
+    let _ = std::io::stderr().flush();
+}
+
+fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
+    let g = gen::generate(seed, args.family.0)?;
+    let dir = args.out.join(format!("{}-{seed}", g.family));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::write(dir.join("plan.svg"), starc_hil::sim::plan_svg::plan_svg(&g.scenario))?;
+    let duration_s = args.max_duration.map(|m| m.min(g.scenario.duration_s));
+    let opts = SimOptions { out: dir.clone(), duration_s, seed, realtime: false, camera: true };
+    run_sim(&g.scenario, &g.text, &opts, &mut |_, _| {}).with_context(|| format!("simulating {}", dir.display()))?;
+    let mission_dir = dir.join("mission");
+    if args.offline {
+        mission_offline(&dir, &mission_dir, args)?;
+    } else {
+        mission_live(&dir, &mission_dir, args)?;
+    }
+    if !args.keep {
+        remove_bulk(&dir);
+    }
+    let report: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(mission_dir.join("report.json"))
+            .with_context(|| format!("reading {}", mission_dir.display()))?,
+    )?;
+    Ok(Row::new(seed, g.family, g.people, duration_s.unwrap_or(g.scenario.duration_s), flatten(&report)))
+}
+
+fn mission_offline(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
+    let truth = starc_eval::Truth::load(dir)?;
+    let inputs = mission_input::from_capture(&dir.join("avia.pcap"))?;
+    let (start, start_gate_m) = match args.hint {
+        Hint::None => (Start::At(Isometry3::identity()), f64::INFINITY),
+        Hint::Truth => (Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 }, 2.0),
+    };
+    run_offline(
+        inputs,
+        Offline {
+            out: out.to_path_buf(),
+            frames_every: args.frames_every,
+            camera: truth.mount.camera.clone(),
+            lidar_t_camera: truth.mount.lidar_t_camera,
+            start,
+            start_gate_m,
+            robot: robot_config(args),
+            truth: Some(truth),
+        },
+    )
+}
+
+fn robot_config(args: &Args) -> RobotCoreConfig {
+    let mut cfg = RobotCoreConfig::default();
+    if let Some(h) = args.walker_min_height_m {
+        cfg.walker_min_height_m = h;
+    }
+    cfg
+}
+
+fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
+    let opts = super::sim_live::LiveOptions {
+        out: out.to_path_buf(),
+        frames_every: args.frames_every,
+        start_hint: match args.hint {
+            Hint::None => None,
+            Hint::Truth => Some((1.0, 20.0)),
+        },
+        start_gate_m: 2.0,
+        view: crate::view::ViewConfig::default(),
+    };
+    super::sim_live::run(dir, &opts)
+}
+
+/// The pcap, the point labels and the camera masks: the bulk of a run (about 250 MB for 30 s),
+/// not needed once it is scored.
+fn remove_bulk(dir: &Path) {
+    for name in ["avia.pcap", "camera", "labels_robot.bin", "labels_fpv.bin"] {
+        let p: PathBuf = dir.join(name);
+        let _ = if p.is_dir() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
+    }
+}

@@ -1,0 +1,80 @@
+//! `starc gen` and `starc eval`: a generated building is an ordinary scenario file that `starc
+//! sim` runs, the same seed gives the same file, a route through a wall is refused, and a short
+//! evaluation writes eval.json with its rows, summary and plots.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::process::Command;
+
+fn starc(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_starc")).args(args).output().unwrap();
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    (out.status.success(), text)
+}
+
+#[test]
+fn gen_writes_a_scenario_that_sim_runs_and_the_same_seed_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.toml"), dir.path().join("b.toml"));
+    let svg = dir.path().join("a.svg");
+    let (ok, text) = starc(&[
+        "gen",
+        "--seed",
+        "12",
+        "--family",
+        "flat",
+        "--out",
+        a.to_str().unwrap(),
+        "--svg",
+        svg.to_str().unwrap(),
+    ]);
+    assert!(ok && text.contains("flat seed 12 (development set)"), "{text}");
+    let (ok, text) = starc(&["gen", "--seed", "12", "--family", "flat", "--out", b.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+    let (ok, text) = starc(&["gen", "--seed", "1003", "--family", "castle", "--out", b.to_str().unwrap()]);
+    assert!(!ok && text.contains("unknown family"), "{text}");
+    let run = dir.path().join("run");
+    let (ok, text) =
+        starc(&["sim", a.to_str().unwrap(), "--duration", "2", "--sensors-only", "--out", run.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(run.join("avia.pcap").exists());
+}
+
+#[test]
+fn sim_refuses_a_route_through_a_wall() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wall.toml");
+    let text = "name = \"t\"\n[[floors]]\nmin = [-1, -1]\nmax = [10, 5]\n[[walls]]\nfrom = [5, -1]\nto = [5, 5]\n[robot]\nwaypoints = [[1, 2, 0], [9, 2, 0]]\n[responder]\nwaypoints = [[1, 1]]\n";
+    std::fs::write(&path, text).unwrap();
+    let (ok, out) =
+        starc(&["sim", path.to_str().unwrap(), "--sensors-only", "--out", dir.path().join("o").to_str().unwrap()]);
+    assert!(!ok && out.contains("robot's leg 0 meets wall at (4.8"), "{out}");
+}
+
+#[test]
+fn eval_writes_rows_a_summary_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("eval");
+    let (ok, text) =
+        starc(&["eval", "--seeds", "5..5", "--offline", "--max-duration", "12", "--out", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let eval: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
+    assert_eq!(eval["buildings"], 1);
+    assert_eq!(eval["test_set"], false);
+    assert_eq!(eval["hint"], "none");
+    let row = &eval["rows"][0];
+    assert!(row["error"].is_null(), "{row}");
+    assert!(row["figures"]["detection.windows"].as_f64().unwrap() > 10.0, "{row}");
+    assert!(eval["summary"]["all"]["figures"]["detection.windows"]["median"].is_number(), "{eval}");
+    let family = row["family"].as_str().unwrap();
+    assert_eq!(eval["summary"][family]["buildings"], 1);
+    let building = out.join(format!("{family}-5"));
+    assert!(building.join("plan.svg").exists() && building.join("mission/report.json").exists());
+    assert!(!building.join("avia.pcap").exists(), "the pcap is removed without --keep");
+    assert!(std::fs::read_dir(out.join("plots")).unwrap().count() >= 3);
+    let (ok, text) = starc(&["eval", "--seeds", "998..1001", "--offline", "--out", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("mixes development seeds"), "{text}");
+}
