@@ -18,9 +18,7 @@ const SECS: f64 = 12.0;
 
 #[path = "support/avia_decode.rs"]
 mod avia_decode;
-#[path = "support/tum.rs"]
-mod tum;
-use tum::{read_tum, truth_at};
+use starc_eval::truth::{at as truth_at, read_tum};
 
 struct Run {
     _dir: tempfile::TempDir,
@@ -46,7 +44,8 @@ fn lab() -> &'static Run {
         run(&scenario, &text, &opts, &mut |_, _| {}).unwrap();
         let avia_decode::Decoded { imu, scans } = avia_decode::decode(&dir.path().join("avia.pcap"), ROBOT_AVIA);
         assert!(imu.len() > 2000 && scans.len() > 100, "{} IMU samples, {} scans", imu.len(), scans.len());
-        Run { truth: read_tum(&dir.path().join("gt_robot.tum")), path: dir.path().to_path_buf(), _dir: dir, imu, scans }
+        let truth = read_tum(&dir.path().join("gt_robot.tum")).unwrap();
+        Run { truth, path: dir.path().to_path_buf(), _dir: dir, imu, scans }
     })
 }
 

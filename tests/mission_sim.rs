@@ -26,6 +26,9 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
         "/detection/recall",
         "/alignment/first_accepted_after_s",
         "/rig_pose_error/translation_m/p50",
+        "/robot_pose_error/translation_m/p50",
+        "/robot_pose_error/rotation_deg/p50",
+        "/robot_pose_error/rmse_m",
         "/latency_ms/slam_p50",
         "/latency_ms/slam_p99",
         "/latency_ms/viz_p50",
@@ -41,6 +44,8 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
     assert!(err < 0.1, "first alignment {err} m off");
     let p50 = report.pointer("/rig_pose_error/translation_m/p50").and_then(|v| v.as_f64()).unwrap();
     assert!(p50 < 0.05, "rig world pose error median {p50} m");
+    let rmse = report.pointer("/robot_pose_error/rmse_m").and_then(|v| v.as_f64()).unwrap();
+    assert!(rmse < 0.1, "robot LIO APE RMSE {rmse} m");
     assert!(report.pointer("/detection/windows").and_then(|v| v.as_u64()).unwrap() > 50);
     let frames = std::fs::read_dir(mission.join("ar")).unwrap().count();
     assert!(frames > 10, "{frames} AR frames");

@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Point3, Vector3};
+use starc_eval::truth::{at as truth_at, read_people, read_tum};
 use starc_hil::sim::lidar::LABEL_EMPTY;
 use starc_hil::sim::run::{run, SimOptions, SimSummary};
 use starc_hil::sim::scenario::Scenario;
@@ -13,10 +14,6 @@ use starc_livox::data::{DataPacket, Point};
 use std::collections::HashMap;
 use std::net::Ipv4Addr;
 use std::path::Path;
-
-#[path = "support/tum.rs"]
-mod tum;
-use tum::{read_tum, truth_at};
 
 fn simulate(name: &str, secs: f64, seed: u64, dir: &Path, camera: bool) -> SimSummary {
     let (scenario, text) = Scenario::load(name).unwrap();
@@ -55,8 +52,8 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
 fn pcap_is_avia_traffic_and_points_match_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let summary = simulate("lab", 4.0, 3, dir.path(), false);
-    let robot_tum = read_tum(&dir.path().join("gt_robot.tum"));
-    let fpv_tum = read_tum(&dir.path().join("gt_fpv.tum"));
+    let robot_tum = read_tum(&dir.path().join("gt_robot.tum")).unwrap();
+    let fpv_tum = read_tum(&dir.path().join("gt_fpv.tum")).unwrap();
     assert_eq!(robot_tum.len(), 801, "200 Hz over 4 s");
     assert!(fpv_tum.len() > 590 && fpv_tum.len() < 610, "the rig powers on at 1 s: {}", fpv_tum.len());
     let labels: HashMap<(bool, u64), Vec<u16>> = ["robot", "fpv"]
@@ -143,7 +140,7 @@ fn pcap_is_avia_traffic_and_points_match_the_truth() {
 fn imu_measures_the_true_motion() {
     let dir = tempfile::tempdir().unwrap();
     simulate("lab", 8.0, 5, dir.path(), false);
-    let tum = read_tum(&dir.path().join("gt_robot.tum"));
+    let tum = read_tum(&dir.path().join("gt_robot.tum")).unwrap();
     let mut gyro_err = Vec::new();
     let mut static_acc = Vec::new();
     for d in capture::open(&dir.path().join("avia.pcap")).unwrap() {
@@ -206,19 +203,9 @@ yaw_deg = 0
     let dir = tempfile::tempdir().unwrap();
     let opts = SimOptions { out: dir.path().to_path_buf(), duration_s: None, seed: 2, realtime: false, camera: true };
     run(&scenario, text, &opts, &mut |_, _| {}).unwrap();
-    let tum = read_tum(&dir.path().join("gt_robot.tum"));
-    // people.csv: time, label, name, pose, centre xyz, size lwh, yaw at 10 Hz.
-    let boxes: Vec<(u64, u16, [f64; 7])> = std::fs::read_to_string(dir.path().join("people.csv"))
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            let t = (f[0].parse::<f64>().unwrap() * 1e3).round() as u64 * 1_000_000;
-            let v: Vec<f64> = f[4..11].iter().map(|x| x.parse().unwrap()).collect();
-            (t, f[1].parse().unwrap(), [v[0], v[1], v[2], v[3], v[4], v[5], v[6]])
-        })
-        .collect();
+    let tum = read_tum(&dir.path().join("gt_robot.tum")).unwrap();
+    // people.csv: each person's box at 10 Hz.
+    let boxes = read_people(&dir.path().join("people.csv")).unwrap();
     let labels: HashMap<u64, Vec<u16>> =
         read_labels(&std::fs::read(dir.path().join("labels_robot.bin")).unwrap()).unwrap().into_iter().collect();
     let (mut inside, mut person_points) = (0usize, [0usize; 3]);
@@ -242,13 +229,13 @@ yaw_deg = 0
             let w =
                 truth_at(&tum, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
             // The box of this person at the nearest 100 ms.
-            let b = boxes.iter().filter(|(_, lb, _)| *lb == label).min_by_key(|(bt, _, _)| bt.abs_diff(t)).unwrap().2;
-            let (s, c) = b[6].sin_cos();
-            let (dx, dy) = (w.x - b[0], w.y - b[1]);
-            let local = [c * dx + s * dy, -s * dx + c * dy, w.z - b[2]];
+            let b = boxes.iter().filter(|b| b.label == label).min_by_key(|b| b.t_ns.abs_diff(t)).unwrap();
+            let (s, c) = b.yaw_rad.sin_cos();
+            let (dx, dy) = (w.x - b.centre_m.x, w.y - b.centre_m.y);
+            let local = [c * dx + s * dy, -s * dx + c * dy, w.z - b.centre_m.z];
             // 5 cm of range noise, and a walker moves up to 5 cm between box samples.
             let margin = 0.12;
-            if (0..3).all(|i| local[i].abs() <= b[3 + i] / 2.0 + margin) {
+            if (0..3).all(|i| local[i].abs() <= b.size_m[i] / 2.0 + margin) {
                 inside += 1;
             }
         }

@@ -55,7 +55,7 @@ pub fn read_tum(path: &Path) -> Result<Trajectory> {
 }
 
 /// The trajectory at `t`, interpolated (clamped to its ends).
-pub fn at(traj: &Trajectory, t: u64) -> Isometry3<f64> {
+pub fn at(traj: &[(u64, Isometry3<f64>)], t: u64) -> Isometry3<f64> {
     let i = traj.partition_point(|(s, _)| *s <= t).clamp(1, traj.len().saturating_sub(1).max(1));
     match (traj.get(i - 1), traj.get(i)) {
         (Some((ta, a)), Some((tb, b))) => {

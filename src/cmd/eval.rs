@@ -16,6 +16,8 @@ use starc_hil::sim::run::{run as run_sim, SimOptions};
 use starc_pipeline::mission::RobotCoreConfig;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 #[derive(clap::Args)]
@@ -50,6 +52,9 @@ pub struct Args {
     /// swinging shins costs and gains on every overlay metric. Offline only.
     #[arg(long)]
     walker_min_height_m: Option<f64>,
+    /// Buildings run at once (default: one per core).
+    #[arg(long)]
+    jobs: Option<usize>,
     /// Cut each run at this many simulated seconds (smoke tests; such figures are not the
     /// building's: the responder may not have arrived).
     #[arg(long)]
@@ -95,6 +100,7 @@ struct EvalFile<'a> {
     mode: &'static str,
     hint: Hint,
     wall_s: f64,
+    jobs: usize,
     buildings: usize,
     failed: usize,
     rows: &'a [Row],
@@ -111,14 +117,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let started = Instant::now();
-    let total = (last - first + 1) as usize;
-    let mut rows = Vec::with_capacity(total);
-    for (i, seed) in (first..=last).enumerate() {
-        let t0 = Instant::now();
-        let row = one_building(&args, seed).unwrap_or_else(|e| Row::failed(seed, args.family.0, &format!("{e:#}")));
-        progress(i + 1, total, &row, t0.elapsed().as_secs_f64(), started.elapsed().as_secs_f64());
-        rows.push(row);
-    }
+    let seeds: Vec<u64> = (first..=last).collect();
+    let rows = run_all(&args, &seeds, started);
     let summary = summarize(&rows);
     let file = EvalFile {
         seeds: [first, last],
@@ -129,6 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         mode: if args.offline { "offline" } else { "live" },
         hint: args.hint,
         wall_s: started.elapsed().as_secs_f64(),
+        jobs: args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         buildings: rows.len(),
         failed: rows.iter().filter(|r| r.error.is_some()).count(),
         rows: &rows,
@@ -147,6 +148,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     print_summary(&file.summary);
     Ok(())
+}
+
+/// Each building on one of `--jobs` threads (the simulator and the mission each keep one core
+/// busy); rows in seed order.
+fn run_all(args: &Args, seeds: &[u64], started: Instant) -> Vec<Row> {
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let rows = Mutex::new(Vec::with_capacity(seeds.len()));
+    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.min(seeds.len()) {
+            scope.spawn(|| {
+                while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    let t0 = Instant::now();
+                    let row = one_building(args, seed)
+                        .unwrap_or_else(|e| Row::failed(seed, args.family.0, &format!("{e:#}")));
+                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    progress(n, seeds.len(), &row, t0.elapsed().as_secs_f64(), started.elapsed().as_secs_f64());
+                    if let Ok(mut rows) = rows.lock() {
+                        rows.push(row);
+                    }
+                }
+            });
+        }
+    });
+    let mut rows = rows.into_inner().unwrap_or_default();
+    rows.sort_by_key(|r| r.seed);
+    rows
 }
 
 fn progress(done: usize, total: usize, row: &Row, took_s: f64, elapsed_s: f64) {

@@ -1,7 +1,9 @@
 //! The person detector against the simulator's truth: a run's robot returns read back from its
 //! pcap (as a real capture), moved into the world with the true pose at each firing, joined with
 //! their labels; windows of them fed to a detector and matched against people.csv.
-//! Shared by tests/detect_sim.rs and benches/detect.rs (which declare `mod tum;` beside it).
+//! Shared by tests/detect_sim.rs and benches/detect.rs (which declare `mod tum;` beside it);
+//! it reads the truth itself (tum.rs, people.csv) because starc-hil's bench cannot depend on
+//! starc-eval, which depends on starc-hil.
 
 use super::tum::{read_tum, truth_at};
 use nalgebra::{Point3, Vector3};

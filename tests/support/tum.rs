@@ -1,4 +1,7 @@
-//! Reading the simulator's TUM ground truth back, for the tests that compare against it.
+//! Reading the simulator's TUM ground truth back, for the code below `starc-eval` in the
+//! dependency graph, which cannot use `starc_eval::truth::{read_tum, at}`: the benches and
+//! examples of starc-hil and starc-pipeline (starc-eval depends on both), and `detect_sim.rs`,
+//! which starc-hil's detect bench shares. The root crate's tests use starc_eval.
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use std::path::Path;

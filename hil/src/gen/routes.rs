@@ -25,6 +25,8 @@ const TURN_ON_SPOT_DEG: f64 = 30.0;
 const FACING_WALL_M: [f64; 3] = [1.0, 1.3, 1.7];
 /// ... and within this distance of somewhere the robot drove: space the robot has mapped.
 const MAPPED_REACH_M: f64 = 4.0;
+/// The responder walks at least this far when the building allows.
+const MIN_WALK_M: f64 = 3.0;
 /// The responder stays this long at the end, looking through the wall.
 const LOOK_S: f64 = 8.0;
 
@@ -213,7 +215,8 @@ fn wrap_deg(a: f64) -> f64 {
 }
 
 /// The responder's walk and start time: from a point of the robot's path outside its first
-/// view, to a place facing a wall with a seen person behind it.
+/// view, at least `MIN_WALK_M` of walking from a place facing a wall with a seen person behind
+/// it (the longest walk found when none is that long).
 fn responder_walk(
     d: &mut Dice,
     (entry, b): ([f64; 3], &Building),
@@ -222,52 +225,69 @@ fn responder_walk(
     robot: &RobotMotion,
     seen: &[&PlanPerson],
 ) -> Result<(Vec<[f64; 2]>, f64), NoRoute> {
-    let start = responder_start(entry, grid, robot_xy).ok_or(NoRoute::NoResponderGoal)?;
+    let starts = responder_starts(entry, grid, robot_xy);
     let mut order: Vec<usize> = (0..seen.len()).collect();
     for i in (1..order.len()).rev() {
         order.swap(i, d.below(i + 1));
     }
-    for i in order {
+    let mut best: Option<(Vec<[f64; 2]>, [f64; 2])> = None;
+    'search: for i in order {
         let Some(person) = seen.get(i) else { continue };
         for goal in behind_wall_goals(b, grid, person, robot_xy) {
-            if let Some(mut walk) = grid.path(start, goal) {
+            for &start in &starts {
+                if (start[0] - goal[0]).hypot(start[1] - goal[1]) < MIN_WALK_M * 0.7 {
+                    continue;
+                }
+                let Some(mut walk) = grid.path(start, goal) else { continue };
                 // A last short step towards the person: the responder ends facing the wall.
                 let (dx, dy) = (person.at[0] - goal[0], person.at[1] - goal[1]);
                 let n = dx.hypot(dy).max(1e-6);
                 walk.push([goal[0] + dx / n * 0.25, goal[1] + dy / n * 0.25]);
-                let start_s = time_robot_passed(robot, start) + 2.0;
-                return Ok((walk, start_s));
+                let long_enough = polyline_m(&walk) >= MIN_WALK_M;
+                if best.as_ref().is_none_or(|(w, _)| polyline_m(&walk) > polyline_m(w)) {
+                    best = Some((walk, start));
+                }
+                if long_enough {
+                    break 'search;
+                }
             }
         }
     }
-    Err(NoRoute::NoResponderGoal)
+    let (walk, start) = best.ok_or(NoRoute::NoResponderGoal)?;
+    Ok((walk, time_robot_passed(robot, start) + 2.0))
 }
 
-/// A passable point on the robot's path at least 4 m (along it) from the robot's start and
-/// outside its first view (70 deg wide, as the Avia's), or failing that the farthest one.
-fn responder_start(entry: [f64; 3], grid: &Grid, robot_xy: &[[f64; 2]]) -> Option<[f64; 2]> {
+/// Passable points of the robot's path, every 0.5 m, where the responder may start: outside
+/// the robot's first view (70 deg wide, as the Avia's) or 9 m or more along its path; past the
+/// first 2 m when no point is.
+fn responder_starts(entry: [f64; 3], grid: &Grid, robot_xy: &[[f64; 2]]) -> Vec<[f64; 2]> {
     let (sx, sy, yaw) = (entry[0], entry[1], entry[2].to_radians());
     let mut along = 0.0;
-    let mut fallback = None;
+    let (mut outside, mut fallback) = (Vec::new(), Vec::new());
     for pair in robot_xy.windows(2) {
         let seg = (pair[1][0] - pair[0][0]).hypot(pair[1][1] - pair[0][1]);
-        let steps = (seg / 0.25).ceil().max(1.0) as usize;
+        let steps = (seg / 0.5).ceil().max(1.0) as usize;
         for k in 0..steps {
             let t = k as f64 / steps as f64;
             let p = [pair[0][0] + (pair[1][0] - pair[0][0]) * t, pair[0][1] + (pair[1][1] - pair[0][1]) * t];
             let s = along + seg * t;
-            if s < 4.0 || !grid.passable(p) {
+            if s < 2.0 || !grid.passable(p) {
                 continue;
             }
             let bearing = wrap_deg(((p[1] - sy).atan2(p[0] - sx) - yaw).to_degrees());
             if bearing.abs() > 35.0 || s > 9.0 {
-                return Some(p);
+                outside.push(p);
+            } else {
+                fallback.push(p);
             }
-            fallback = Some(p);
         }
         along += seg;
     }
-    fallback
+    if outside.is_empty() {
+        fallback
+    } else {
+        outside
+    }
 }
 
 /// Points outside the person's region, facing one of its sides across a wall (not through a
