@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The figures the summary line and the plots lead with.
-pub const HEADLINE: [&str; 8] = [
+pub const HEADLINE: [&str; 10] = [
     "inlier_ratio.pooled",
     "overlay.person_coverage",
     "overlay.people_shown",
@@ -18,7 +18,9 @@ pub const HEADLINE: [&str; 8] = [
     "detection.recall",
     "alignment.accepted",
     "alignment.first_accepted_after_s",
+    "alignment.first_error_m",
     "rig_pose_error.translation_m.p50",
+    "robot_pose_error.rmse_m",
 ];
 
 /// One building.
@@ -132,6 +134,36 @@ pub fn print_summary(summary: &Value) {
     }
 }
 
+/// The headline figures' medians per family and over all, as a Markdown table (summary.md):
+/// each cell is the median and, in brackets, how many buildings have the figure.
+pub fn markdown_table(summary: &Value) -> String {
+    use std::fmt::Write as _;
+    let mut t = String::from("| buildings |");
+    for k in HEADLINE {
+        let _ = write!(t, " {k} |");
+    }
+    t.push_str("\n|---|");
+    t.push_str(&"---|".repeat(HEADLINE.len()));
+    t.push('\n');
+    let Some(groups) = summary.as_object() else { return t };
+    let order = std::iter::once("all".to_string()).chain(groups.keys().filter(|k| *k != "all").cloned());
+    for group in order {
+        let g = &summary[&group];
+        let _ = write!(t, "| {group} ({}) |", g["buildings"]);
+        for k in HEADLINE {
+            let s = &g["figures"][k];
+            match s["median"].as_f64() {
+                Some(m) => {
+                    let _ = write!(t, " {} ({}) |", short(m), s["n"]);
+                }
+                None => t.push_str(" - |"),
+            }
+        }
+        t.push('\n');
+    }
+    t
+}
+
 /// One SVG per headline figure: each building a dot, by family, with the median as a line.
 pub fn write_plots(rows: &[Row], dir: &Path) -> Result<usize> {
     std::fs::create_dir_all(dir).map_err(|source| crate::EvalError::Write { path: dir.to_path_buf(), source })?;
@@ -184,7 +216,7 @@ fn strip_plot(title: &str, count: usize, points: &[(usize, &str, f64)]) -> Strin
     );
     let mut values: Vec<f64> = points.iter().map(|p| p.2).collect();
     values.sort_by(f64::total_cmp);
-    let median = values[values.len() / 2];
+    let median = values.get(values.len() / 2).copied().unwrap_or(lo);
     let _ = write!(
         s,
         "<line x1=\"{m}\" y1=\"{0:.1}\" x2=\"{1}\" y2=\"{0:.1}\" stroke=\"#888\" stroke-dasharray=\"4 3\"/>",
@@ -229,6 +261,20 @@ mod tests {
         assert_eq!(f.get("ok"), Some(&1.0));
         assert_eq!(f.get("q.1"), Some(&2.0));
         assert!(!f.contains_key("name"));
+    }
+
+    #[test]
+    fn the_markdown_table_has_a_row_per_group() {
+        let rows = vec![
+            Row::new(1, Family::Flat, 1, 30.0, [("detection.recall".to_string(), 0.5)].into_iter().collect()),
+            Row::new(2, Family::Lab, 1, 30.0, BTreeMap::new()),
+        ];
+        let table = markdown_table(&summarize(&rows));
+        assert!(
+            table.contains("| all (2) |") && table.contains("| flat (1) |") && table.contains("| lab (1) |"),
+            "{table}"
+        );
+        assert!(table.contains(" 0.500 (1) |"), "{table}");
     }
 
     #[test]

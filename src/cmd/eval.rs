@@ -10,14 +10,14 @@ use super::mission::{run_offline, Offline, Start};
 use super::mission_input;
 use anyhow::{bail, Context};
 use nalgebra::Isometry3;
-use starc_eval::batch::{flatten, print_summary, summarize, write_plots, Row};
+use starc_eval::batch::{flatten, markdown_table, print_summary, summarize, write_plots, Row};
 use starc_hil::gen;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
 use starc_pipeline::mission::RobotCoreConfig;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
 
 #[derive(clap::Args)]
@@ -52,7 +52,7 @@ pub struct Args {
     /// swinging shins costs and gains on every overlay metric. Offline only.
     #[arg(long)]
     walker_min_height_m: Option<f64>,
-    /// Buildings run at once (default: one per core).
+    /// Buildings run at once (default: one per core offline, one live).
     #[arg(long)]
     jobs: Option<usize>,
     /// Cut each run at this many simulated seconds (smoke tests; such figures are not the
@@ -124,12 +124,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seeds: [first, last],
         max_duration_s: args.max_duration,
         walker_min_height_m: robot_config(&args).walker_min_height_m,
-        test_set: gen::is_test_seed(first),
+        test_set: gen::is_test_seed(first) && args.hint == Hint::None && args.max_duration.is_none(),
         family: args.family.0.map_or_else(|| "any".to_string(), |f| f.to_string()),
         mode: if args.offline { "offline" } else { "live" },
         hint: args.hint,
         wall_s: started.elapsed().as_secs_f64(),
-        jobs: args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        jobs: jobs(&args),
         buildings: rows.len(),
         failed: rows.iter().filter(|r| r.error.is_some()).count(),
         rows: &rows,
@@ -139,8 +139,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::write(&path, serde_json::to_string_pretty(&file)?)
         .with_context(|| format!("writing {}", path.display()))?;
     let plots = write_plots(&rows, &args.out.join("plots"))?;
+    let table = args.out.join("summary.md");
+    std::fs::write(&table, markdown_table(&file.summary)).with_context(|| format!("writing {}", table.display()))?;
     println!(
-        "{} buildings ({} failed) in {:.0} s; wrote {} and {plots} plots",
+        "{} buildings ({} failed) in {:.0} s; wrote {}, summary.md and {plots} plots",
         file.buildings,
         file.failed,
         file.wall_s,
@@ -156,26 +158,43 @@ fn run_all(args: &Args, seeds: &[u64], started: Instant) -> Vec<Row> {
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let rows = Mutex::new(Vec::with_capacity(seeds.len()));
-    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
     std::thread::scope(|scope| {
-        for _ in 0..jobs.min(seeds.len()) {
+        for _ in 0..jobs(args).min(seeds.len()) {
             scope.spawn(|| {
                 while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::Relaxed)) {
                     let t0 = Instant::now();
-                    let row = one_building(args, seed)
-                        .unwrap_or_else(|e| Row::failed(seed, args.family.0, &format!("{e:#}")));
+                    let row = guarded(args, seed);
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;
                     progress(n, seeds.len(), &row, t0.elapsed().as_secs_f64(), started.elapsed().as_secs_f64());
-                    if let Ok(mut rows) = rows.lock() {
-                        rows.push(row);
-                    }
+                    rows.lock().unwrap_or_else(PoisonError::into_inner).push(row);
                 }
             });
         }
     });
-    let mut rows = rows.into_inner().unwrap_or_default();
+    let mut rows = rows.into_inner().unwrap_or_else(PoisonError::into_inner);
     rows.sort_by_key(|r| r.seed);
     rows
+}
+
+/// One building, its failure or panic a failed row rather than the end of the batch.
+fn guarded(args: &Args, seed: u64) -> Row {
+    let failed = |why: String| Row::failed(seed, args.family.0, &why);
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| one_building(args, seed))) {
+        Ok(Ok(row)) => row,
+        Ok(Err(e)) => failed(format!("{e:#}")),
+        Err(panic) => {
+            let what =
+                panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned());
+            failed(format!("panicked: {}", what.unwrap_or_default()))
+        }
+    }
+}
+
+/// Buildings at once: `--jobs`, else one per core offline and one live (a live run keeps both
+/// nodes busy at the real pace, and its latencies are figures).
+fn jobs(args: &Args) -> usize {
+    let default = if args.offline { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { 1 };
+    args.jobs.unwrap_or(default).max(1)
 }
 
 fn progress(done: usize, total: usize, row: &Row, took_s: f64, elapsed_s: f64) {

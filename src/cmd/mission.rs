@@ -55,6 +55,10 @@ pub struct Args {
     pub start_hint_deg: f64,
     #[arg(long, default_value_t = 2.0)]
     pub start_gate_m: f64,
+    /// Draw a walker only from this height above the floor up (the robot core's
+    /// `walker_min_height_m`, 0.8 by default; 0 draws their legs too).
+    #[arg(long)]
+    pub walker_min_height_m: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -67,7 +71,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lidar_t_camera: truth.mount.lidar_t_camera,
         start: Start::FromTruth { hint_m: args.start_hint_m, hint_deg: args.start_hint_deg },
         start_gate_m: args.start_gate_m,
-        robot: RobotCoreConfig::default(),
+        robot: RobotCoreConfig {
+            walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),
+            ..RobotCoreConfig::default()
+        },
         truth: Some(truth),
     };
     run_offline(inputs, run)
@@ -168,15 +175,14 @@ pub fn run_offline(inputs: impl Iterator<Item = anyhow::Result<Input>>, run: Off
         let rig_new = !rig_outs.is_empty();
         for o in rig_outs.drain(..) {
             rig_tum.push(tum_line(o.end_ns, &o.lidar_pose));
-            if !hint_set {
-                if let (Some(first), Some(sc), Start::FromTruth { hint_m, hint_deg }) =
-                    (rig.first_ns(), score.as_mut(), &run.start)
+            if let (Some(first), Some(sc)) = (rig.first_ns(), score.as_mut()) {
+                // Alignment times count from the rig's first pose, however its start is seeded.
+                sc.rig_started(first);
+                if let (false, Start::FromTruth { hint_m, hint_deg }, Some(l_t_w)) =
+                    (hint_set, &run.start, sc.lio_t_world)
                 {
-                    if let Some(l_t_w) = sc.lio_t_world {
-                        sc.rig_started(first);
-                        rig.set_start_hint(sc.truth.start_hint(&l_t_w, first, *hint_m, *hint_deg));
-                        hint_set = true;
-                    }
+                    rig.set_start_hint(sc.truth.start_hint(&l_t_w, first, *hint_m, *hint_deg));
+                    hint_set = true;
                 }
             }
             // The robot's map as the rig would hold it from the link's tiles: its newest state.

@@ -129,6 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint_m: 1.0,
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
+            walker_min_height_m: None,
         })?;
     } else if !args.sensors_only && !args.no_camera {
         let opts = super::sim_live::LiveOptions {

@@ -87,7 +87,7 @@ fn flat(d: &mut Dice) -> Building {
         let f = &mut b.furniture;
         match d.below(4) {
             0 => {
-                f.against_wall(d, &region, "bed", [2.0, 1.4, 1.0], None);
+                f.bed_against_wall(d, &region, [2.0, 1.4, 1.0]);
                 f.against_wall(d, &region, "shelving", [0.9, 0.4, 1.9], None);
                 f.against_wall(d, &region, "chair", [0.45, 0.45, 0.9], None);
             }

@@ -20,6 +20,13 @@ pub struct Furnisher {
     pub items: Vec<PlanFurniture>,
 }
 
+/// Which side of an item goes to the wall: its back (+y), or a bed's headboard end (+x).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Back {
+    PlusY,
+    PlusX,
+}
+
 /// Which side of a region.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Side {
@@ -65,19 +72,43 @@ impl Furnisher {
         size_m: [f64; 3],
         side: Option<Side>,
     ) -> Option<usize> {
+        self.on_wall(d, region, (kind, Back::PlusY), size_m, side)
+    }
+
+    /// A bed with its headboard (its +x end) to a wall of `region`.
+    pub fn bed_against_wall(&mut self, d: &mut Dice, region: &Region, size_m: [f64; 3]) -> Option<usize> {
+        self.on_wall(d, region, ("bed", Back::PlusX), size_m, None)
+    }
+
+    fn on_wall(
+        &mut self,
+        d: &mut Dice,
+        region: &Region,
+        (kind, back): (&'static str, Back),
+        size_m: [f64; 3],
+        side: Option<Side>,
+    ) -> Option<usize> {
         let size_m = vary(d, size_m);
+        // Along the wall, and away from it.
+        let (along_m, depth_m) = match back {
+            Back::PlusY => (size_m[0], size_m[1]),
+            Back::PlusX => (size_m[1], size_m[0]),
+        };
         for _ in 0..TRIES {
             let side = side.or_else(|| d.pick(&Side::ALL))?;
             let r = region.rect;
-            let (l, w) = (size_m[0], size_m[1]);
-            let along = |d: &mut Dice, lo: f64, hi: f64| d.range(lo + l / 2.0, (hi - l / 2.0).max(lo + l / 2.0));
+            let half = along_m / 2.0;
+            let along = |d: &mut Dice, lo: f64, hi: f64| d.range(lo + half, (hi - half).max(lo + half));
+            let off = WALL_GAP_M + depth_m / 2.0;
             let at = match side {
-                Side::South => [along(d, r.min[0], r.max[0]), r.min[1] + WALL_GAP_M + w / 2.0],
-                Side::North => [along(d, r.min[0], r.max[0]), r.max[1] - WALL_GAP_M - w / 2.0],
-                Side::West => [r.min[0] + WALL_GAP_M + w / 2.0, along(d, r.min[1], r.max[1])],
-                Side::East => [r.max[0] - WALL_GAP_M - w / 2.0, along(d, r.min[1], r.max[1])],
+                Side::South => [along(d, r.min[0], r.max[0]), r.min[1] + off],
+                Side::North => [along(d, r.min[0], r.max[0]), r.max[1] - off],
+                Side::West => [r.min[0] + off, along(d, r.min[1], r.max[1])],
+                Side::East => [r.max[0] - off, along(d, r.min[1], r.max[1])],
             };
-            let item = PlanFurniture { kind, at, yaw_deg: side.yaw_deg(), base_z_m: 0.0, size_m, material: None };
+            let turn = if back == Back::PlusX { 90.0 } else { 0.0 };
+            let item =
+                PlanFurniture { kind, at, yaw_deg: side.yaw_deg() + turn, base_z_m: 0.0, size_m, material: None };
             if self.fits(&item.rect(), region, 0.08) {
                 self.items.push(item);
                 return Some(self.items.len() - 1);
@@ -106,14 +137,14 @@ impl Furnisher {
                 size_m,
                 material: None,
             };
-            let half = item.rect().size();
+            let size = item.rect().size();
             let inner = region.rect.inset(walkway_m);
-            if inner.size()[0] < half[0] || inner.size()[1] < half[1] {
-                return None;
+            if inner.size()[0] < size[0] || inner.size()[1] < size[1] {
+                continue;
             }
             item.at = [
-                d.range(inner.min[0] + half[0] / 2.0, inner.max[0] - half[0] / 2.0),
-                d.range(inner.min[1] + half[1] / 2.0, inner.max[1] - half[1] / 2.0),
+                d.range(inner.min[0] + size[0] / 2.0, inner.max[0] - size[0] / 2.0),
+                d.range(inner.min[1] + size[1] / 2.0, inner.max[1] - size[1] / 2.0),
             ];
             if self.fits(&item.rect(), region, walkway_m) {
                 self.items.push(item);

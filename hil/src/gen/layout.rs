@@ -137,14 +137,10 @@ pub fn corridor_with_rooms(d: &mut Dice, shell: &Shell, spec: &CorridorSpec, pre
             let open = !d.chance(spec.closed_door_chance);
             corridor_wall.doors.push(PlanDoor { at_m: at, width_m: door_w, open });
             if d.chance(0.25) && rect.size()[0] > 3.5 {
-                corridor_wall.windows.push(PlanWindow {
-                    at_m: 0.0,
-                    width_m: d.range(0.8, 1.5),
-                    sill_m: 1.0,
-                    height_m: 0.8,
-                });
-                let last = corridor_wall.windows.len() - 1;
-                corridor_wall.windows[last].at_m = if at - lo_x > hi_x - at { lo_x + 1.2 } else { hi_x - 1.2 };
+                // A window on the far side of the room's door.
+                let at_m = if at - lo_x > hi_x - at { lo_x + 1.2 } else { hi_x - 1.2 };
+                let width_m = d.range(0.8, 1.5);
+                corridor_wall.windows.push(PlanWindow { at_m, width_m, sill_m: 1.0, height_m: 0.8 });
             }
             rooms.push(Region {
                 name: format!("{prefix}{}{}", if side > 0.0 { "n" } else { "s" }, i + 1),

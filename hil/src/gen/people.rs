@@ -6,6 +6,7 @@ use crate::gen::furnish::distance_to_rect;
 use crate::gen::grid::Grid;
 use crate::gen::layout::Dice;
 use crate::gen::plan::{PlanFurniture, PlanPerson, Region};
+use crate::sim::obstacles::{distance_to_polyline, segment_points};
 use crate::sim::scenario::PoseKind;
 
 /// Clearance a standing or crouching person needs from walls and furniture.
@@ -14,6 +15,10 @@ const STAND_CLEAR_M: f64 = 0.3;
 const APART_M: f64 = 0.9;
 /// A mattress's top as a share of a bed's height (the headboard's top): the simulator's bed.
 pub const MATTRESS_SHARE: f64 = 0.55;
+/// Height of a seated person's seat above their feet' plane, for the 1.75 m adult the sitting
+/// pose is drawn for (hil/src/sim/human.rs); it scales with the person's height.
+const SIT_HEIGHT_M: f64 = 0.45;
+const REFERENCE_HEIGHT_M: f64 = 1.75;
 const KINDS_TO_SIT_ON: [&str; 4] = ["chair", "sofa", "bench", "seat_row"];
 const KINDS_TO_HIDE_BEHIND: [&str; 6] = ["kitchen_island", "cabinet", "desk", "table", "pallet_stack", "sofa"];
 
@@ -52,26 +57,40 @@ pub fn place(d: &mut Dice, b: &Building, grid: &Grid) -> Vec<PlanPerson> {
         let region = 1 + d.below(b.regions.len().saturating_sub(1).max(1));
         let Some(r) = b.regions.get(region) else { continue };
         let role = role(d);
-        let placed = match role {
-            Role::Sitting => seated(d, b, region, &mut used_seats),
-            Role::Lying => lying(d, b, region, grid),
-            Role::Crouching => crouched(d, b, region, grid),
-            Role::InDoorway => in_doorway(d, r),
-            Role::Standing | Role::Walking => standing(d, b, region, grid),
+        let (placed, seat) = match role {
+            Role::Sitting => seated(d, b, region, &used_seats).map_or((None, None), |(p, i)| (Some(p), Some(i))),
+            Role::Lying => (lying(d, b, region, grid), None),
+            Role::Crouching => (crouched(d, b, region, grid), None),
+            Role::InDoorway => (in_doorway(d, r), None),
+            Role::Standing | Role::Walking => (standing(d, b, region, grid), None),
         };
         let Some(mut p) = placed else { continue };
-        if people.iter().any(|q| (q.at[0] - p.at[0]).hypot(q.at[1] - p.at[1]) < APART_M) {
-            continue;
-        }
         if role == Role::Walking {
             p.path = walk(d, r, grid, p.at).into_iter().collect();
             p.speed_m_s = d.range(0.5, 1.3);
         }
+        if people.iter().any(|q| too_close(q, &p)) {
+            continue;
+        }
+        used_seats.extend(seat);
         p.name = format!("p{}_{}", people.len() + 1, attempt);
         p.region = region;
         people.push(p);
     }
     people
+}
+
+/// Whether two people (their spots, and a walker's whole walk) come within `APART_M`.
+fn too_close(a: &PlanPerson, b: &PlanPerson) -> bool {
+    let line = |p: &PlanPerson| -> Vec<[f64; 2]> { std::iter::once(p.at).chain(p.path.iter().copied()).collect() };
+    let (la, lb) = (line(a), line(b));
+    let near =
+        |points: &[[f64; 2]], other: &[[f64; 2]]| points.iter().any(|&p| distance_to_polyline(p, other) < APART_M);
+    near(&la, &lb) || near(&lb, &la) || walks_cross(&la, &lb)
+}
+
+fn walks_cross(a: &[[f64; 2]], b: &[[f64; 2]]) -> bool {
+    a.windows(2).any(|s| segment_points(s[0], s[1], 0.1).any(|p| distance_to_polyline(p, b) < APART_M))
 }
 
 fn person(d: &mut Dice, pose: PoseKind, at: [f64; 2], yaw_deg: f64, base_z_m: f64) -> PlanPerson {
@@ -124,19 +143,29 @@ fn items_in<'a>(
         .filter(move |(_, f)| kinds.contains(&f.kind) && rect.is_some_and(|r| r.contains(f.at)))
 }
 
-/// On a seat, facing out of it (a seat's front is its local -y).
-fn seated(d: &mut Dice, b: &Building, region: usize, used: &mut Vec<usize>) -> Option<PlanPerson> {
+/// On a seat, facing out of it (a seat's front is its local -y), at one of its seats, thighs
+/// on its top: a chair's, a sofa's and a seat row's seat is at half their height, a bench's at
+/// its top.
+fn seated(d: &mut Dice, b: &Building, region: usize, used: &[usize]) -> Option<(PlanPerson, usize)> {
     let seats: Vec<usize> =
         items_in(b, region, &KINDS_TO_SIT_ON).map(|(i, _)| i).filter(|i| !used.contains(i)).collect();
     let i = d.pick(&seats)?;
     let seat = b.furniture.items.get(i)?;
-    used.push(i);
-    let along = (seat.size_m[0] / 2.0 - 0.35).max(0.0);
-    let offset = d.range(-along, along);
     let (s, c) = seat.yaw_deg.to_radians().sin_cos();
+    let offset = if seat.kind == "seat_row" {
+        // The simulator's seat row holds a seat per 0.5 m; sit on one, not between two.
+        let n = (seat.size_m[0] / 0.5).floor().max(1.0);
+        let pitch = seat.size_m[0] / n;
+        -seat.size_m[0] / 2.0 + pitch * (d.below(n as usize) as f64 + 0.5)
+    } else {
+        let along = (seat.size_m[0] / 2.0 - 0.35).max(0.0);
+        d.range(-along, along)
+    };
     let at = [seat.at[0] + c * offset, seat.at[1] + s * offset];
-    let yaw = seat.yaw_deg - 90.0;
-    Some(person(d, PoseKind::Sitting, at, yaw, seat.base_z_m))
+    let seat_top = seat.base_z_m + if seat.kind == "bench" { seat.size_m[2] } else { 0.5 * seat.size_m[2] };
+    let mut p = person(d, PoseKind::Sitting, at, seat.yaw_deg - 90.0, 0.0);
+    p.base_z_m = seat_top - SIT_HEIGHT_M * p.height_m / REFERENCE_HEIGHT_M;
+    Some((p, i))
 }
 
 /// On a bed (along its length, local x, head at the headboard's +x end), or on the floor.
@@ -145,10 +174,12 @@ fn lying(d: &mut Dice, b: &Building, region: usize, grid: &Grid) -> Option<PlanP
     if let Some(i) = d.pick(&beds) {
         let bed = b.furniture.items.get(i)?;
         let (s, c) = bed.yaw_deg.to_radians().sin_cos();
-        // The pelvis a little towards the foot of the bed: the head is 0.7 m towards +x.
-        let at = [bed.at[0] - c * 0.15, bed.at[1] - s * 0.15];
-        let z = bed.base_z_m + bed.size_m[2] * MATTRESS_SHARE;
-        return Some(person(d, PoseKind::Lying, at, bed.yaw_deg, z));
+        // The head (0.7 m from the pelvis for a 1.75 m adult) a hand's width from the
+        // headboard at the bed's +x end.
+        let mut p = person(d, PoseKind::Lying, bed.at, bed.yaw_deg, bed.base_z_m + bed.size_m[2] * MATTRESS_SHARE);
+        let from_centre = bed.size_m[0] / 2.0 - 0.2 - 0.7 * p.height_m / REFERENCE_HEIGHT_M;
+        p.at = [bed.at[0] + c * from_centre, bed.at[1] + s * from_centre];
+        return Some(p);
     }
     for _ in 0..20 {
         let (at, z) = free_spot(d, b, region, grid, STAND_CLEAR_M)?;
@@ -156,7 +187,13 @@ fn lying(d: &mut Dice, b: &Building, region: usize, grid: &Grid) -> Option<PlanP
         let (s, c) = yaw.to_radians().sin_cos();
         let head = [at[0] + c * 0.8, at[1] + s * 0.8];
         let feet = [at[0] - c * 0.9, at[1] - s * 0.9];
-        if z > 0.0 || (grid.clearance_m(head) > 0.25 && grid.clearance_m(feet) > 0.25) {
+        let on_platform = |q: [f64; 2]| b.platforms.iter().any(|(r, _)| r.inset(0.1).contains(q));
+        let fits = if z > 0.0 {
+            on_platform(head) && on_platform(feet)
+        } else {
+            grid.clearance_m(head) > 0.25 && grid.clearance_m(feet) > 0.25
+        };
+        if fits {
             return Some(person(d, PoseKind::Lying, at, yaw, z));
         }
     }
@@ -210,9 +247,5 @@ fn walk(d: &mut Dice, r: &Region, grid: &Grid, from: [f64; 2]) -> Option<[f64; 2
 }
 
 fn clear_line(grid: &Grid, a: [f64; 2], b: [f64; 2], clear_m: f64) -> bool {
-    let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / 0.05).ceil().max(1.0) as usize;
-    (0..=n).all(|k| {
-        let t = k as f64 / n as f64;
-        grid.clearance_m([a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]) >= clear_m
-    })
+    segment_points(a, b, 0.05).all(|p| grid.clearance_m(p) >= clear_m)
 }

@@ -8,6 +8,9 @@ use crate::gen::grid::Grid;
 use crate::gen::layout::Dice;
 use crate::gen::plan::{PlanPerson, Routes};
 use crate::sim::motion::{ResponderMotion, RobotMotion};
+use crate::sim::obstacles::{
+    distance_to_polyline, distance_to_segment, segment_points, Doorway, FloorPlan, Footprint, ObstacleKind,
+};
 use crate::sim::scenario::{Mount, Responder, Robot};
 
 /// The robot stops visiting rooms once its route is this long: a run's length is mostly the
@@ -21,26 +24,41 @@ const ENTRY_REACH_M: (f64, f64) = (2.5, 6.0);
 const KEEP_FROM_PEOPLE_M: f64 = 1.2;
 /// Turns sharper than this are made on the spot, before the next leg.
 const TURN_ON_SPOT_DEG: f64 = 30.0;
-/// The responder's end point is this far from the wall it faces.
-const FACING_WALL_M: [f64; 3] = [1.0, 1.3, 1.7];
+/// The responder's end point is this far outside the inner face of the person's room or aisle,
+/// nearest first.
+/// Beyond a double row of racking (2-2.4 m deep) the farther ones are the same distance from
+/// its far face.
+const FACING_WALL_M: [f64; 7] = [1.0, 1.3, 1.7, 3.0, 3.3, 3.7, 4.1];
 /// ... and within this distance of somewhere the robot drove: space the robot has mapped.
 const MAPPED_REACH_M: f64 = 4.0;
-/// The responder walks at least this far when the building allows.
+/// The responder walks at least this far when the building allows, and never farther than
+/// the longer bound (a run's length is what an evaluation pays for).
 const MIN_WALK_M: f64 = 3.0;
+const MAX_WALK_M: f64 = 12.0;
+/// Furniture at least this tall hides who is behind it as a wall does (loaded racking).
+const OCCLUDER_M: f64 = 1.8;
 /// The responder stays this long at the end, looking through the wall.
 const LOOK_S: f64 = 8.0;
 
 /// Why a building got no routes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum NoRoute {
     /// No room with people that the robot can reach.
+    #[error("no room with people that the robot can reach")]
     NoReachablePeople,
     /// No place behind a wall from a seen person that the responder can reach.
+    #[error("no place behind a wall from a person the robot saw that the responder can reach")]
     NoResponderGoal,
 }
 
 /// The robot's visits, then the responder's walk.
-pub fn plan(d: &mut Dice, b: &Building, people: &[PlanPerson], grid: &Grid) -> Result<Routes, NoRoute> {
+/// `plan` is the building's floor plan without its people; `grid` has them.
+pub fn plan(
+    d: &mut Dice,
+    (b, plan): (&Building, &FloorPlan),
+    people: &[PlanPerson],
+    grid: &Grid,
+) -> Result<Routes, NoRoute> {
     let entry = choose_entry(d, b, people, grid);
     let (robot_xy, visited) = robot_path(entry, b, people, grid)?;
     let robot = with_headings(&robot_xy, entry[2], people, &visited);
@@ -48,7 +66,7 @@ pub fn plan(d: &mut Dice, b: &Building, people: &[PlanPerson], grid: &Grid) -> R
     let robot_motion = RobotMotion::new(&robot_of(&robot, robot_speed));
     let responder_speed = d.range(0.8, 1.2);
     let seen: Vec<&PlanPerson> = people.iter().filter(|p| visited.contains(&p.region) && p.path.is_empty()).collect();
-    let (responder, start_s) = responder_walk(d, (entry, b), grid, &robot_xy, &robot_motion, &seen)?;
+    let (responder, start_s) = responder_walk(d, (entry, b, plan), grid, &robot_xy, &robot_motion, &seen)?;
     let walk_end = ResponderMotion::new(&responder_of(&responder, start_s, responder_speed)).route().end_s();
     let duration_s = (robot_motion.route().end_s() + 2.0).max(walk_end + LOOK_S).ceil();
     Ok(Routes {
@@ -179,7 +197,7 @@ fn polyline_m(points: &[[f64; 2]]) -> f64 {
 }
 
 /// Waypoints with headings: the robot faces along each leg, turns on the spot where a leg
-/// bends sharply, and at each visited room turns to face its people.
+/// bends sharply, and at the end turns to face the people of the last room it visited.
 fn with_headings(path: &[[f64; 2]], start_deg: f64, people: &[PlanPerson], visited: &[usize]) -> Vec<[f64; 3]> {
     let mut out = Vec::new();
     let mut heading = start_deg;
@@ -219,7 +237,7 @@ fn wrap_deg(a: f64) -> f64 {
 /// it (the longest walk found when none is that long).
 fn responder_walk(
     d: &mut Dice,
-    (entry, b): ([f64; 3], &Building),
+    (entry, b, plan): ([f64; 3], &Building, &FloorPlan),
     grid: &Grid,
     robot_xy: &[[f64; 2]],
     robot: &RobotMotion,
@@ -233,12 +251,14 @@ fn responder_walk(
     let mut best: Option<(Vec<[f64; 2]>, [f64; 2])> = None;
     'search: for i in order {
         let Some(person) = seen.get(i) else { continue };
-        for goal in behind_wall_goals(b, grid, person, robot_xy) {
+        for goal in behind_wall_goals((b, plan), grid, person, robot_xy) {
             for &start in &starts {
                 if (start[0] - goal[0]).hypot(start[1] - goal[1]) < MIN_WALK_M * 0.7 {
                     continue;
                 }
-                let Some(mut walk) = grid.path(start, goal) else { continue };
+                let Some(mut walk) = grid.path(start, goal).filter(|w| polyline_m(w) <= MAX_WALK_M) else {
+                    continue;
+                };
                 // A last short step towards the person: the responder ends facing the wall.
                 let (dx, dy) = (person.at[0] - goal[0], person.at[1] - goal[1]);
                 let n = dx.hypot(dy).max(1e-6);
@@ -292,45 +312,43 @@ fn responder_starts(entry: [f64; 3], grid: &Grid, robot_xy: &[[f64; 2]]) -> Vec<
 
 /// Points outside the person's region, facing one of its sides across a wall (not through a
 /// doorway), within reach of the robot's path, nearest to the path first.
-fn behind_wall_goals(b: &Building, grid: &Grid, person: &PlanPerson, robot_xy: &[[f64; 2]]) -> Vec<[f64; 2]> {
+fn behind_wall_goals(
+    (b, plan): (&Building, &FloorPlan),
+    grid: &Grid,
+    person: &PlanPerson,
+    robot_xy: &[[f64; 2]],
+) -> Vec<[f64; 2]> {
     let Some(region) = b.regions.get(person.region) else { return Vec::new() };
     let r = region.rect;
     let p = person.at;
     let clamp = |v: f64, lo: f64, hi: f64| v.clamp(lo + 0.5, (hi - 0.5).max(lo + 0.5));
-    let mut goals = Vec::new();
-    for &gap in &FACING_WALL_M {
-        let x = clamp(p[0], r.min[0], r.max[0]);
-        let y = clamp(p[1], r.min[1], r.max[1]);
-        goals.push([x, r.min[1] - gap]);
-        goals.push([x, r.max[1] + gap]);
-        goals.push([r.min[0] - gap, y]);
-        goals.push([r.max[0] + gap, y]);
-    }
-    let mut ok: Vec<([f64; 2], f64)> = goals
-        .into_iter()
-        .filter(|&g| grid.passable(g) && !r.contains(g))
-        .filter(|&g| !through_doorway(b, g, p))
-        .map(|g| (g, distance_to_polyline(g, robot_xy)))
-        .filter(|&(_, reach)| reach <= MAPPED_REACH_M)
+    let (x, y) = (clamp(p[0], r.min[0], r.max[0]), clamp(p[1], r.min[1], r.max[1]));
+    let mut ok: Vec<([f64; 2], (f64, f64))> = FACING_WALL_M
+        .iter()
+        .flat_map(|&gap| {
+            [[x, r.min[1] - gap], [x, r.max[1] + gap], [r.min[0] - gap, y], [r.max[0] + gap, y]].map(|g| (g, gap))
+        })
+        .filter(|&(g, _)| grid.passable(g) && !r.contains(g) && behind_a_wall(plan, g, p))
+        .map(|(g, gap)| (g, (gap, distance_to_polyline(g, robot_xy))))
+        .filter(|&(_, (_, reach))| reach <= MAPPED_REACH_M)
         .collect();
-    ok.sort_by(|a, b| a.1.total_cmp(&b.1));
+    // Nearest the wall first, then nearest the robot's route.
+    ok.sort_by(|a, b| a.1 .0.total_cmp(&b.1 .0).then(a.1 .1.total_cmp(&b.1 .1)));
     ok.into_iter().map(|(g, _)| g).collect()
 }
 
-/// Whether the sight line from `a` to `b` passes through a region's entrance.
-fn through_doorway(b: &Building, a: [f64; 2], c: [f64; 2]) -> bool {
-    b.regions.iter().filter_map(|r| r.entrance).any(|e| distance_to_segment(e, a, c) < 0.8)
-}
-
-fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
-}
-
-fn distance_to_polyline(p: [f64; 2], line: &[[f64; 2]]) -> f64 {
-    line.windows(2).map(|w| distance_to_segment(p, w[0], w[1])).fold(f64::INFINITY, f64::min)
+/// Whether the sight line from `a` to `c` is blocked by a wall, a closed door or something at
+/// least `OCCLUDER_M` tall (loaded racking), and passes no doorway and no window.
+fn behind_a_wall(plan: &FloorPlan, a: [f64; 2], c: [f64; 2]) -> bool {
+    let gap = |o: &Doorway| distance_to_segment(o.centre, a, c) < o.half_m[0] + 0.3;
+    if plan.doorways.iter().chain(&plan.windows).any(gap) {
+        return false;
+    }
+    let blocks = |o: &&Footprint| match o.kind {
+        ObstacleKind::Wall | ObstacleKind::ClosedDoor => true,
+        ObstacleKind::Furniture => o.top_z_m >= OCCLUDER_M,
+    };
+    plan.obstacles.iter().filter(blocks).any(|o| segment_points(a, c, 0.05).any(|p| o.distance_m(p) <= 0.0))
 }
 
 /// When the robot was nearest to `p` (s), sampled every 0.1 s.

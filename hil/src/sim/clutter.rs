@@ -3,10 +3,13 @@
 //! place them alike.
 
 use crate::rng::{hash2, SplitMix64};
-use crate::sim::scenario::{Clutter, Scenario};
+use crate::sim::obstacles::{rect_distance_m, segment_points};
+use crate::sim::scenario::{Clutter, PoseKind, Scenario};
 
-/// A person keeps this far from any clutter box on their spot or their walk.
-const PERSON_CLEAR_M: f64 = 0.15;
+/// A person keeps this far from any clutter box on their spot or their walk: a shoulder's
+/// half width, and a lying person's half length (a lying person's spot is their pelvis).
+const PERSON_CLEAR_M: f64 = 0.35;
+const LYING_CLEAR_M: f64 = 1.0;
 
 /// One clutter box: footprint centre, size (length, width, height) and yaw.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -21,30 +24,26 @@ pub struct ClutterItem {
 impl ClutterItem {
     /// Distance from a point to the box's footprint (0 inside).
     pub fn distance_m(&self, p: [f64; 2]) -> f64 {
-        let (s, c) = self.yaw_rad.sin_cos();
-        let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
-        let (lx, ly) = (c * dx + s * dy, -s * dx + c * dy);
-        let ox = (lx.abs() - self.size_m[0] / 2.0).max(0.0);
-        let oy = (ly.abs() - self.size_m[1] / 2.0).max(0.0);
-        ox.hypot(oy)
+        rect_distance_m(self.centre, [self.size_m[0] / 2.0, self.size_m[1] / 2.0], self.yaw_rad, p)
     }
 }
 
 /// Every clutter box of the scenario that no person stands on or walks through.
 pub fn placed(s: &Scenario) -> Vec<ClutterItem> {
-    let routes: Vec<Vec<[f64; 2]>> = s
+    let routes: Vec<(Vec<[f64; 2]>, f64)> = s
         .people
         .iter()
         .map(|p| {
             let p = p.get_ref();
-            std::iter::once(p.at).chain(p.path.iter().copied()).collect()
+            let clear_m = if p.pose == PoseKind::Lying { LYING_CLEAR_M } else { PERSON_CLEAR_M };
+            (std::iter::once(p.at).chain(p.path.iter().copied()).collect(), clear_m)
         })
         .collect();
     s.clutter
         .iter()
         .enumerate()
         .flat_map(|(i, c)| drawn(c.get_ref(), i))
-        .filter(|item| routes.iter().all(|r| !meets(item, r)))
+        .filter(|item| routes.iter().all(|(r, clear_m)| !meets(item, r, *clear_m)))
         .collect()
 }
 
@@ -63,20 +62,13 @@ fn drawn(c: &Clutter, table: usize) -> Vec<ClutterItem> {
         .collect()
 }
 
-/// Whether a person's spot or walk (`route`) comes within `PERSON_CLEAR_M` of the box.
-fn meets(item: &ClutterItem, route: &[[f64; 2]]) -> bool {
-    let near = |p: [f64; 2]| item.distance_m(p) < PERSON_CLEAR_M;
-    if route.len() == 1 {
-        return near(route[0]);
+/// Whether a person's spot or walk (`route`) comes within `clear_m` of the box.
+fn meets(item: &ClutterItem, route: &[[f64; 2]], clear_m: f64) -> bool {
+    let near = |p: [f64; 2]| item.distance_m(p) < clear_m;
+    match route {
+        [only] => near(*only),
+        _ => route.windows(2).any(|pair| segment_points(pair[0], pair[1], 0.02).any(near)),
     }
-    route.windows(2).any(|pair| {
-        let (a, b) = (pair[0], pair[1]);
-        let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) / 0.02).ceil().max(1.0) as usize;
-        (0..=steps).any(|k| {
-            let t = k as f64 / steps as f64;
-            near([a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t])
-        })
-    })
 }
 
 #[cfg(test)]

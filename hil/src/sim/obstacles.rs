@@ -36,15 +36,47 @@ pub struct Footprint {
     pub top_z_m: f64,
 }
 
+/// Distance from `p` to a rectangle of half sizes `half_m` turned by `yaw_rad` about `centre`
+/// (0 inside).
+pub fn rect_distance_m(centre: [f64; 2], half_m: [f64; 2], yaw_rad: f64, p: [f64; 2]) -> f64 {
+    let (s, c) = yaw_rad.sin_cos();
+    let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
+    let (lx, ly) = (c * dx + s * dy, -s * dx + c * dy);
+    let ox = (lx.abs() - half_m[0]).max(0.0);
+    let oy = (ly.abs() - half_m[1]).max(0.0);
+    ox.hypot(oy)
+}
+
+/// Points from `a` to `b`, both included, at most `step_m` apart.
+pub fn segment_points(a: [f64; 2], b: [f64; 2], step_m: f64) -> impl Iterator<Item = [f64; 2]> {
+    let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / step_m).ceil().max(1.0) as usize;
+    (0..=n).map(move |k| {
+        let t = k as f64 / n as f64;
+        [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]
+    })
+}
+
+/// Distance from `p` to the segment from `a` to `b`.
+pub fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// Distance from `p` to a polyline (to its one point when it has one; infinite when empty).
+pub fn distance_to_polyline(p: [f64; 2], line: &[[f64; 2]]) -> f64 {
+    match line {
+        [] => f64::INFINITY,
+        [only] => (p[0] - only[0]).hypot(p[1] - only[1]),
+        _ => line.windows(2).map(|w| distance_to_segment(p, w[0], w[1])).fold(f64::INFINITY, f64::min),
+    }
+}
+
 impl Footprint {
     /// Distance from a point to the rectangle (0 inside).
     pub fn distance_m(&self, p: [f64; 2]) -> f64 {
-        let (s, c) = self.yaw_rad.sin_cos();
-        let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
-        let (lx, ly) = (c * dx + s * dy, -s * dx + c * dy);
-        let ox = (lx.abs() - self.half_m[0]).max(0.0);
-        let oy = (ly.abs() - self.half_m[1]).max(0.0);
-        ox.hypot(oy)
+        rect_distance_m(self.centre, self.half_m, self.yaw_rad, p)
     }
 
     /// The axis-aligned bounds (min, max) of the rectangle.
@@ -70,6 +102,8 @@ pub struct Doorway {
 pub struct FloorPlan {
     pub obstacles: Vec<Footprint>,
     pub doorways: Vec<Doorway>,
+    /// Windows above the floor: gaps one sees through but cannot walk through.
+    pub windows: Vec<Doorway>,
     /// The floors' rectangles (min, max): outside them there is no floor.
     pub floors: Vec<([f64; 2], [f64; 2])>,
 }
@@ -169,8 +203,12 @@ fn add_wall(plan: &mut FloorPlan, w: &Wall) {
             plan.obstacles.push(piece(at, (a, b), half_t, yaw_rad, ObstacleKind::ClosedDoor, top));
         }
     }
-    for o in w.windows.iter().filter(|o| o.sill_m < STEP_THROUGH_SILL_M) {
-        gaps.push((o.at_m - o.width_m / 2.0, o.at_m + o.width_m / 2.0, true));
+    for o in &w.windows {
+        if o.sill_m < STEP_THROUGH_SILL_M {
+            gaps.push((o.at_m - o.width_m / 2.0, o.at_m + o.width_m / 2.0, true));
+        } else {
+            plan.windows.push(Doorway { centre: at(o.at_m), half_m: [o.width_m / 2.0, half_t], yaw_rad });
+        }
     }
     gaps.sort_by(|p, q| p.0.total_cmp(&q.0));
     let mut s0 = 0.0;

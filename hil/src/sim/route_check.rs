@@ -3,7 +3,7 @@
 //! walker on a stage walks on it, not through it). Ground without a floor slab is allowed (the
 //! outdoors before a door). Run on every scenario `starc sim` loads, generated or by hand.
 
-use crate::sim::obstacles::FloorPlan;
+use crate::sim::obstacles::{segment_points, FloorPlan};
 use crate::sim::scenario::Scenario;
 
 /// How close the robot's or the responder's centre line may come to an obstacle: a body is at
@@ -125,15 +125,9 @@ fn first_contact(
     half_width_m: f64,
     base_z_m: f64,
 ) -> Option<([f64; 2], String, f64)> {
-    let len = (b[0] - a[0]).hypot(b[1] - a[1]);
-    let steps = (len / STEP_M).ceil().max(1.0) as usize;
-    (0..=steps).find_map(|i| {
-        let k = i as f64 / steps as f64;
-        let p = [a[0] + (b[0] - a[0]) * k, a[1] + (b[1] - a[1]) * k];
-        match plan.nearest_above(p, base_z_m) {
-            Some((o, d)) if d <= half_width_m => Some((p, o.name.clone(), d)),
-            _ => None,
-        }
+    segment_points(a, b, STEP_M).find_map(|p| match plan.nearest_above(p, base_z_m) {
+        Some((o, d)) if d <= half_width_m => Some((p, o.name.clone(), d)),
+        _ => None,
     })
 }
 
