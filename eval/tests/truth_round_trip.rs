@@ -17,25 +17,12 @@ use starc_hil::sim::world::World;
 
 /// A wall with a door, someone behind it and someone in the doorway; the robot and the
 /// responder face them.
-const SCENARIO: &str = r#"
-name = "round trip"
-[[walls]]
-from = [4, -3]
-to = [4, 3]
-doors = [{ at_m = 4.5, width_m = 1.0 }]
-[[people]]
-name = "hidden"
-at = [6, 0]
-yaw_deg = 180
-[[people]]
-name = "in the doorway"
-at = [6, 1.5]
-yaw_deg = 180
-[robot]
-waypoints = [[0, -1, 0]]
-[responder]
-waypoints = [[0, 0], [2, 0]]
-"#;
+fn scenario_text() -> String {
+    format!(
+        "{}[robot]\nwaypoints = [[0, -1, 0]]\n[responder]\nwaypoints = [[0, 0], [2, 0]]\n",
+        starc_hil::sim::fixtures::WALL_AND_DOORWAY
+    )
+}
 
 /// The largest distance and angle (rad) between two poses.
 fn apart(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
@@ -72,10 +59,11 @@ fn tum_lines_read_back_as_written() {
 #[test]
 fn a_simulator_run_reads_back_equal() {
     let dir = tempfile::tempdir().unwrap();
-    let scenario = Scenario::parse(SCENARIO, "round trip").unwrap();
+    let text = scenario_text();
+    let scenario = Scenario::parse(&text, "round trip").unwrap();
     let opts =
         SimOptions { out: dir.path().to_path_buf(), duration_s: Some(0.5), seed: 1, realtime: false, camera: true };
-    let summary = run(&scenario, SCENARIO, &opts, &mut |_, _| {}).unwrap();
+    let summary = run(&scenario, &text, &opts, &mut |_, _| {}).unwrap();
     let offset = AviaLink::ptp_offset_ns();
     let sim_s = |ptp_ns: u64| ptp_ns.checked_add_signed(-offset).unwrap() as f64 * 1e-9;
     let world = World::new(&scenario);
@@ -134,7 +122,7 @@ fn a_simulator_run_reads_back_equal() {
 
     // Truth::load reads it all; its masks are the camera's.
     let truth = Truth::load(dir.path()).unwrap();
-    assert_eq!(truth.scenario, "round trip");
+    assert_eq!(truth.scenario, "wall and doorway");
     assert_eq!(truth.frames, frames);
     assert_eq!(truth.mount, mount);
     for f in [&frames[0], &frames[frames.len() - 1]] {

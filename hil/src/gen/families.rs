@@ -49,6 +49,20 @@ fn distractors(d: &mut Dice, f: &mut Furnisher, region: &Region, n: usize) {
     }
 }
 
+/// Furnishes every region from `first` on with `furnish`, then adds one or two distractors.
+fn furnish_rooms(
+    d: &mut Dice,
+    b: &mut Building,
+    first: usize,
+    mut furnish: impl FnMut(&mut Dice, &mut Furnisher, &Region),
+) {
+    for region in b.regions.iter().skip(first) {
+        furnish(d, &mut b.furniture, region);
+        let n = d.count(1, 2);
+        distractors(d, &mut b.furniture, region, n);
+    }
+}
+
 fn corridor_building(d: &mut Dice, shell: Shell, spec: &CorridorSpec, floor_material: &'static str) -> Building {
     let layout = corridor_with_rooms(d, &shell, spec, "room ");
     let entry_y = spec.width_m / 2.0;
@@ -82,35 +96,29 @@ fn flat(d: &mut Dice) -> Building {
     };
     let floor = if d.chance(0.5) { "carpet" } else { "wood" };
     let mut b = corridor_building(d, shell, &spec, floor);
-    for i in 1..b.regions.len() {
-        let region = b.regions[i].clone();
-        let f = &mut b.furniture;
-        match d.below(4) {
-            0 => {
-                f.bed_against_wall(d, &region, [2.0, 1.4, 1.0]);
-                f.against_wall(d, &region, "shelving", [0.9, 0.4, 1.9], None);
-                f.against_wall(d, &region, "chair", [0.45, 0.45, 0.9], None);
-            }
-            1 => {
-                f.against_wall(d, &region, "sofa", [2.0, 0.9, 0.85], None);
-                f.free_standing(d, &region, "table", [1.0, 0.6, 0.45], 0.5);
-                f.against_wall(d, &region, "shelving", [1.0, 0.4, 1.9], None);
-            }
-            2 => {
-                f.free_standing(d, &region, "kitchen_island", [1.6, 0.9, 0.9], 0.8);
-                f.against_wall(d, &region, "cabinet", [1.8, 0.6, 0.9], None);
-                f.against_wall(d, &region, "chair", [0.45, 0.45, 0.9], None);
-            }
-            _ => {
-                f.free_standing(d, &region, "table", [1.2, 0.8, 0.75], 0.7);
-                for _ in 0..3 {
-                    f.against_wall(d, &region, "chair", [0.45, 0.45, 0.9], None);
-                }
+    furnish_rooms(d, &mut b, 1, |d, f, region| match d.below(4) {
+        0 => {
+            f.bed_against_wall(d, region, [2.0, 1.4, 1.0]);
+            f.against_wall(d, region, "shelving", [0.9, 0.4, 1.9], None);
+            f.against_wall(d, region, "chair", [0.45, 0.45, 0.9], None);
+        }
+        1 => {
+            f.against_wall(d, region, "sofa", [2.0, 0.9, 0.85], None);
+            f.free_standing(d, region, "table", [1.0, 0.6, 0.45], 0.5);
+            f.against_wall(d, region, "shelving", [1.0, 0.4, 1.9], None);
+        }
+        2 => {
+            f.free_standing(d, region, "kitchen_island", [1.6, 0.9, 0.9], 0.8);
+            f.against_wall(d, region, "cabinet", [1.8, 0.6, 0.9], None);
+            f.against_wall(d, region, "chair", [0.45, 0.45, 0.9], None);
+        }
+        _ => {
+            f.free_standing(d, region, "table", [1.2, 0.8, 0.75], 0.7);
+            for _ in 0..3 {
+                f.against_wall(d, region, "chair", [0.45, 0.45, 0.9], None);
             }
         }
-        let n = d.count(1, 2);
-        distractors(d, f, &region, n);
-    }
+    });
     b
 }
 
@@ -137,22 +145,18 @@ fn office(d: &mut Dice) -> Building {
         let n = d.count(2, 3);
         distractors(d, &mut b.furniture, &open, n);
     }
-    for i in 2..b.regions.len() {
-        let region = b.regions[i].clone();
-        let f = &mut b.furniture;
+    furnish_rooms(d, &mut b, 2, |d, f, region| {
         if d.chance(0.5) {
-            f.free_standing(d, &region, "table", [2.2, 1.0, 0.75], 0.8);
+            f.free_standing(d, region, "table", [2.2, 1.0, 0.75], 0.8);
             for _ in 0..4 {
-                f.against_wall(d, &region, "chair", [0.5, 0.5, 0.9], None);
+                f.against_wall(d, region, "chair", [0.5, 0.5, 0.9], None);
             }
         } else {
-            f.against_wall(d, &region, "desk", [1.4, 0.7, 0.75], None);
-            f.against_wall(d, &region, "shelving", [1.0, 0.4, 1.9], None);
-            f.free_standing(d, &region, "round_table", [0.9, 0.9, 0.75], 0.7);
+            f.against_wall(d, region, "desk", [1.4, 0.7, 0.75], None);
+            f.against_wall(d, region, "shelving", [1.0, 0.4, 1.9], None);
+            f.free_standing(d, region, "round_table", [0.9, 0.9, 0.75], 0.7);
         }
-        let n = d.count(1, 2);
-        distractors(d, f, &region, n);
-    }
+    });
     b
 }
 
@@ -218,19 +222,15 @@ fn lab(d: &mut Dice) -> Building {
         closed_door_chance: 0.3,
     };
     let mut b = corridor_building(d, shell, &spec, "floor_tile");
-    for i in 1..b.regions.len() {
-        let region = b.regions[i].clone();
-        let f = &mut b.furniture;
-        f.free_standing(d, &region, "table", [1.6, 0.8, 0.9], 0.8);
-        f.against_wall(d, &region, "table", [1.8, 0.7, 0.9], None);
-        f.against_wall(d, &region, "shelving", [1.0, 0.45, 1.9], None);
-        f.against_wall(d, &region, "cabinet", [1.2, 0.5, 1.1], None);
+    furnish_rooms(d, &mut b, 1, |d, f, region| {
+        f.free_standing(d, region, "table", [1.6, 0.8, 0.9], 0.8);
+        f.against_wall(d, region, "table", [1.8, 0.7, 0.9], None);
+        f.against_wall(d, region, "shelving", [1.0, 0.45, 1.9], None);
+        f.against_wall(d, region, "cabinet", [1.2, 0.5, 1.1], None);
         for _ in 0..2 {
-            f.against_wall(d, &region, "chair", [0.45, 0.45, 0.9], None);
+            f.against_wall(d, region, "chair", [0.45, 0.45, 0.9], None);
         }
-        let n = d.count(1, 2);
-        distractors(d, f, &region, n);
-    }
+    });
     b
 }
 

@@ -140,26 +140,11 @@ mod tests {
 
     #[test]
     fn a_person_behind_a_wall_is_only_in_the_see_through_mask() {
-        let text = r#"
-name = "t"
-[[walls]]
-from = [4, -3]
-to = [4, 3]
-doors = [{ at_m = 4.5, width_m = 1.0 }]
-[[people]]
-name = "hidden"
-at = [6, 0]
-yaw_deg = 180
-[[people]]
-name = "in the doorway"
-at = [6, 1.5]
-yaw_deg = 180
-[robot]
-waypoints = [[0, 0, 0]]
-[responder]
-waypoints = [[0, 0]]
-"#;
-        let scenario = match Scenario::parse(text, "t") {
+        let text = format!(
+            "{}[robot]\nwaypoints = [[0, 0, 0]]\n[responder]\nwaypoints = [[0, 0]]\n",
+            crate::sim::fixtures::WALL_AND_DOORWAY
+        );
+        let scenario = match Scenario::parse(&text, "t") {
             Ok(s) => s,
             Err(e) => panic!("{e}"),
         };
