@@ -53,17 +53,19 @@ fn sim_refuses_a_route_through_a_wall() {
     assert!(!ok && out.contains("robot's leg 0 meets wall at (4.8"), "{out}");
 }
 
+/// Seed 17's responder powers on at 9.2 s: 18 s leave the rig several seconds of scans.
 #[test]
 fn eval_writes_rows_a_summary_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("eval");
     let (ok, text) =
-        starc(&["eval", "--seeds", "5..5", "--offline", "--max-duration", "12", "--out", out.to_str().unwrap()]);
+        starc(&["eval", "--seeds", "17..17", "--offline", "--max-duration", "18", "--out", out.to_str().unwrap()]);
     assert!(ok, "{text}");
     let eval: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
     assert_eq!(eval["buildings"], 1);
     assert_eq!(eval["test_set"], false);
+    assert_eq!(eval["max_duration_s"], 18.0);
     assert_eq!(eval["hint"], "none");
     let row = &eval["rows"][0];
     assert!(row["error"].is_null(), "{row}");
@@ -71,7 +73,7 @@ fn eval_writes_rows_a_summary_and_plots() {
     assert!(eval["summary"]["all"]["figures"]["detection.windows"]["median"].is_number(), "{eval}");
     let family = row["family"].as_str().unwrap();
     assert_eq!(eval["summary"][family]["buildings"], 1);
-    let building = out.join(format!("{family}-5"));
+    let building = out.join(format!("{family}-17"));
     assert!(building.join("plan.svg").exists() && building.join("mission/report.json").exists());
     assert!(!building.join("avia.pcap").exists(), "the pcap is removed without --keep");
     assert!(std::fs::read_dir(out.join("plots")).unwrap().count() >= 3);
