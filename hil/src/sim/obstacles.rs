@@ -47,9 +47,11 @@ pub fn rect_distance_m(centre: [f64; 2], half_m: [f64; 2], yaw_rad: f64, p: [f64
     ox.hypot(oy)
 }
 
-/// Points from `a` to `b`, both included, at most `step_m` apart.
+/// Points from `a` to `b`, both included, at most `step_m` apart (at most a million: a
+/// non-finite or absurd leg is sampled coarsely rather than forever).
 pub fn segment_points(a: [f64; 2], b: [f64; 2], step_m: f64) -> impl Iterator<Item = [f64; 2]> {
-    let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / step_m).ceil().max(1.0) as usize;
+    const MOST: f64 = 1e6;
+    let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / step_m).ceil().clamp(1.0, MOST) as usize;
     (0..=n).map(move |k| {
         let t = k as f64 / n as f64;
         [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]
