@@ -19,7 +19,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if is_mcap(&args.file) {
+    if super::lio_input::is_mcap(&args.file) {
         return run_mcap(&args);
     }
     let mut cap = capture::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;
@@ -171,12 +171,6 @@ pub fn table(name: &str, s: &CaptureSummary) -> String {
         let _ = writeln!(o, "\n{:<16}{e}", "read error");
     }
     o
-}
-
-fn is_mcap(path: &std::path::Path) -> bool {
-    use std::io::Read;
-    let mut magic = [0u8; 8];
-    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == *b"\x89MCAP0\r\n"
 }
 
 /// An MCAP recording: read as far as it goes (a crashed recording is summarized up to its last

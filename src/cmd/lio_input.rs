@@ -110,7 +110,7 @@ pub fn lio_scan(scan: &Scan) -> LioScan {
 pub fn is_mcap(path: &Path) -> bool {
     let mut head = [0u8; 8];
     std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head)).is_ok()
-        && head == *b"\x89MCAP0\r\n"
+        && head[..] == *starc_pipeline::record::scan::MAGIC
 }
 
 /// One input of the LIO from a recording: the device is the topic's first name

@@ -11,7 +11,8 @@ use crate::PipelineError;
 use std::collections::{BTreeMap, VecDeque};
 use std::io::Read;
 
-pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+/// The bytes an MCAP file starts and ends with.
+pub use mcap::MAGIC;
 
 const OP_FOOTER: u8 = 0x02;
 const OP_SCHEMA: u8 = 0x03;
@@ -128,7 +129,7 @@ fn record(buf: &[u8], pos: usize) -> Result<Option<RawRecord<'_>>, PipelineError
 pub fn is_finished(tail: &[u8]) -> bool {
     let n = tail.len();
     n >= 37
-        && tail.get(n - 8..) == Some(&MAGIC[..])
+        && tail.get(n - 8..) == Some(MAGIC)
         && tail.get(n - 37) == Some(&OP_FOOTER)
         && tail.get(n - 36..n - 28) == Some(&20u64.to_le_bytes()[..])
 }
@@ -180,7 +181,7 @@ impl<R: Read> Scanner<R> {
         if n < magic.len() {
             return Err(PipelineError::Truncated { format: "MCAP", what: "magic", need: 8, have: n as u64 });
         }
-        if &magic != MAGIC {
+        if magic[..] != *MAGIC {
             return Err(bad(0, "no MCAP magic"));
         }
         Ok(Self {
