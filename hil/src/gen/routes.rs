@@ -11,7 +11,7 @@ use crate::sim::motion::{ResponderMotion, RobotMotion};
 use crate::sim::obstacles::{
     distance_to_polyline, distance_to_segment, segment_points, Doorway, FloorPlan, Footprint, ObstacleKind,
 };
-use crate::sim::scenario::{Mount, Responder, Robot};
+use crate::sim::scenario::{Responder, Robot};
 
 /// The robot stops visiting rooms once its route is this long: a run's length is mostly the
 /// robot's drive (rest to rest at about half its top speed), and a held-out evaluation of two
@@ -63,11 +63,12 @@ pub fn plan(
     let (robot_xy, visited) = robot_path(entry, b, people, grid)?;
     let robot = with_headings(&robot_xy, entry[2], people, &visited);
     let robot_speed = d.range(0.5, 0.8);
-    let robot_motion = RobotMotion::new(&robot_of(&robot, robot_speed));
+    let robot_motion = RobotMotion::new(&Robot::with_route(robot.clone(), robot_speed));
     let responder_speed = d.range(0.8, 1.2);
     let seen: Vec<&PlanPerson> = people.iter().filter(|p| visited.contains(&p.region) && p.path.is_empty()).collect();
     let (responder, start_s) = responder_walk(d, (entry, b, plan), grid, &robot_xy, &robot_motion, &seen)?;
-    let walk_end = ResponderMotion::new(&responder_of(&responder, start_s, responder_speed)).route().end_s();
+    let walk_end =
+        ResponderMotion::new(&Responder::with_route(responder.clone(), start_s, responder_speed)).route().end_s();
     let duration_s = (robot_motion.route().end_s() + 2.0).max(walk_end + LOOK_S).ceil();
     Ok(Routes {
         robot,
@@ -77,36 +78,6 @@ pub fn plan(
         responder_speed_m_s: responder_speed,
         duration_s,
     })
-}
-
-fn robot_of(waypoints: &[[f64; 3]], speed: f64) -> Robot {
-    Robot {
-        start_s: 0.0,
-        static_s: 2.0,
-        waypoints: waypoints.to_vec(),
-        max_speed_m_s: speed,
-        max_accel_m_s2: 0.5,
-        max_yaw_rate_deg_s: 45.0,
-        pause_s: 0.5,
-        lidar_height_m: 0.45,
-        lidar_pitch_deg: 0.0,
-        wheels: Default::default(),
-        motors: Default::default(),
-    }
-}
-
-fn responder_of(waypoints: &[[f64; 2]], start_s: f64, speed: f64) -> Responder {
-    Responder {
-        start_s,
-        static_s: 2.0,
-        mount: Mount::Helmet,
-        waypoints: waypoints.to_vec(),
-        yaw_deg: None,
-        speed_m_s: speed,
-        pause_s: 0.5,
-        rig_height_m: None,
-        rig_pitch_deg: 0.0,
-    }
 }
 
 /// The robot's path through every reachable room with people, nearest first, and the rooms.

@@ -296,6 +296,43 @@ pub struct Robot {
     pub motors: MotorProtocol,
 }
 
+impl Robot {
+    /// A robot with the file's defaults but for its waypoints and top speed (what `starc gen`
+    /// writes), to time its route before the file exists.
+    pub fn with_route(waypoints: Vec<[f64; 3]>, max_speed_m_s: f64) -> Self {
+        Robot {
+            start_s: 0.0,
+            static_s: default_static_s(),
+            waypoints,
+            max_speed_m_s,
+            max_accel_m_s2: default_robot_accel(),
+            max_yaw_rate_deg_s: default_robot_yaw_rate(),
+            pause_s: default_pause(),
+            lidar_height_m: default_robot_lidar_z(),
+            lidar_pitch_deg: 0.0,
+            wheels: WheelLayout::default(),
+            motors: MotorProtocol::default(),
+        }
+    }
+}
+
+impl Responder {
+    /// A helmet-mounted responder with the file's defaults but for its route, start and speed.
+    pub fn with_route(waypoints: Vec<[f64; 2]>, start_s: f64, speed_m_s: f64) -> Self {
+        Responder {
+            start_s,
+            static_s: default_static_s(),
+            mount: Mount::Helmet,
+            waypoints,
+            yaw_deg: None,
+            speed_m_s,
+            pause_s: default_pause(),
+            rig_height_m: None,
+            rig_pitch_deg: 0.0,
+        }
+    }
+}
+
 fn default_static_s() -> f64 {
     2.0
 }
