@@ -2,9 +2,6 @@
 
 mod cmd;
 mod node;
-// The live views (issue 7): a library for `starc fpv` and `starc sim`, not wired into a command yet.
-#[allow(dead_code, unused_imports)]
-mod view;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -21,8 +18,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run an Avia mock device and the live driver against each other on loopback (the main job
-    /// until the simulated mission exists).
+    /// Run an Avia mock device and the live driver against each other on loopback (no hardware
+    /// needed).
     Demo(cmd::demo::Args),
     /// List the Livox devices on the network.
     Devices(cmd::devices::Args),
@@ -39,6 +36,8 @@ enum Command {
     Inspect(cmd::inspect::Args),
     /// Send a capture's packets to a UDP socket with their original timing.
     Replay(cmd::replay::Args),
+    /// Rerun the mission's pipeline on the nodes' MCAP recordings (offline, in time order).
+    Rerun(cmd::rerun::Args),
     /// Write the scans of a capture as point-cloud files.
     Export(cmd::export::Args),
     /// Simulate a scenario and run the see-through mission on it live: mock devices, the robot
@@ -82,6 +81,7 @@ fn main() -> ExitCode {
         Command::Imu(c) => cmd::imu::run(c),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Replay(a) => cmd::replay::run(a),
+        Command::Rerun(a) => cmd::rerun::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Sim(a) => cmd::sim::run(a),
         Command::Gen(a) => cmd::gen::run(a),

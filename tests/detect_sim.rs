@@ -8,8 +8,6 @@
 #[path = "support/detect_sim.rs"]
 #[allow(dead_code)] // the bench uses the timing half
 mod detect_sim;
-#[path = "support/tum.rs"]
-mod tum;
 
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;

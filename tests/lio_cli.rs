@@ -20,9 +20,6 @@ fn ok(out: Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-#[path = "support/avia_decode.rs"]
-mod avia_decode;
-
 fn python() -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
     assert!(p.exists(), "{} missing: .ci/run installs tests/peers/requirements.txt there", p.display());
@@ -141,7 +138,7 @@ fn record_robot(pcap: &Path, path: &Path) {
     use starc_pipeline::cloud::{CloudPoint, PointCloud};
     use starc_pipeline::record::{Recorder, RecorderOptions};
     use starc_time::{Clock, Stamp};
-    let d = avia_decode::decode(pcap, std::net::Ipv4Addr::new(192, 168, 1, 101));
+    let d = starc_bridge::decode_avia(pcap, std::net::Ipv4Addr::new(192, 168, 1, 101)).unwrap();
     let mut rec = Recorder::create(path, RecorderOptions::default()).unwrap();
     let mut imu = d.imu.iter().peekable();
     for scan in &d.scans {

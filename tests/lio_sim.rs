@@ -16,8 +16,6 @@ use std::sync::OnceLock;
 const ROBOT_AVIA: Ipv4Addr = Ipv4Addr::new(192, 168, 1, 101);
 const SECS: f64 = 12.0;
 
-#[path = "support/avia_decode.rs"]
-mod avia_decode;
 use starc_eval::truth::{at as truth_at, read_tum};
 
 struct Run {
@@ -42,7 +40,8 @@ fn lab() -> &'static Run {
             camera: false,
         };
         run(&scenario, &text, &opts, &mut |_, _| {}).unwrap();
-        let avia_decode::Decoded { imu, scans } = avia_decode::decode(&dir.path().join("avia.pcap"), ROBOT_AVIA);
+        let starc_bridge::AviaInputs { imu, scans } =
+            starc_bridge::decode_avia(&dir.path().join("avia.pcap"), ROBOT_AVIA).unwrap();
         assert!(imu.len() > 2000 && scans.len() > 100, "{} IMU samples, {} scans", imu.len(), scans.len());
         let truth = read_tum(&dir.path().join("gt_robot.tum")).unwrap();
         Run { truth, path: dir.path().to_path_buf(), _dir: dir, imu, scans }

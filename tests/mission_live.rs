@@ -2,7 +2,7 @@
 //! run back over their real protocol; the robot node and the rig node (each with its own live
 //! driver) talk over zenoh on tcp/127.0.0.1; report.json (mode "live") holds the link's latency
 //! and the rig is aligned; both nodes' MCAP recordings decode with mcap-ros2-support and rosbags;
-//! `starc replay` of the recordings reruns the pipeline.
+//! `starc rerun` of the recordings reruns the pipeline, the same bytes every time.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -84,24 +84,54 @@ fn the_live_mission_links_the_nodes_and_aligns_the_rig() {
     }
 
     // The recordings rerun offline: the robot's side sees the same scans, so it finds the same
-    // people in the same windows; the rig aligns again.
-    let rerun = dir.path().join("rerun");
-    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
-        .arg("replay")
-        .arg(mission.join("robot.mcap"))
-        .arg(mission.join("fpv.mcap"))
-        .arg("--out")
-        .arg(&rerun)
-        .arg("--truth")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    println!("{stdout}");
-    let again: Value = serde_json::from_str(&std::fs::read_to_string(rerun.join("report.json")).unwrap()).unwrap();
+    // people in the same windows; the rig aligns again. With no wall clock in it, a rerun writes
+    // the same bytes every time.
+    let rerun = |name: &str| {
+        let out_dir = dir.path().join(name);
+        let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+            .arg("rerun")
+            .arg(mission.join("robot.mcap"))
+            .arg(mission.join("fpv.mcap"))
+            .arg("--out")
+            .arg(&out_dir)
+            .arg("--truth")
+            .arg(dir.path())
+            .arg("--no-wall-timing")
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        println!("{stdout}");
+        out_dir
+    };
+    let (first_run, second_run) = (rerun("rerun_a"), rerun("rerun_b"));
+    let again: Value = serde_json::from_str(&std::fs::read_to_string(first_run.join("report.json")).unwrap()).unwrap();
     for key in ["/detection/windows", "/detection/true_positives", "/detection/false_positives"] {
-        assert_eq!(again.pointer(key), report.pointer(key), "{key}: replay {again} live {report}");
+        assert_eq!(again.pointer(key), report.pointer(key), "{key}: rerun {again} live {report}");
     }
     assert!(f64_at(&again, "/alignment/first_error_m") < 0.1);
+    let (a, b) = (files_under(&first_run), files_under(&second_run));
+    assert!(a.len() > 10, "{a:?}");
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (name, bytes) in &a {
+        assert!(b.get(name) == Some(bytes), "{name} differs between two reruns");
+    }
+}
+
+/// Every file under `dir` by its path relative to `dir`, with its bytes.
+fn files_under(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                let name = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.insert(name, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
 }

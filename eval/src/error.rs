@@ -25,6 +25,12 @@ pub enum EvalError {
     /// The run has no camera frames to score (`starc sim --no-camera`).
     #[error("{path}: no camera frames; the mission scores camera frames: run `starc sim` without --no-camera")]
     NoCameraFrames { path: PathBuf },
+    /// A mission input that could not be read (a capture or recording).
+    #[error("mission input: {0}")]
+    Input(String),
+    /// A mission that gave no poses for one side.
+    #[error("the LIO produced no poses for {side} (did both devices stand still at the start?)")]
+    NoPoses { side: &'static str },
     /// A mask, camera model or AR frame refused by the pipeline.
     #[error("{path}: {source}")]
     Pipeline { path: PathBuf, source: PipelineError },

@@ -9,6 +9,7 @@
 //!   people shown, which drawing fewer points cannot raise.
 //! - [`report`]: report.json's types; [`summary()`]: the lines printed; [`quantiles()`].
 //! - [`svg_plot`]: small SVG plots; [`plots`]: the report's three.
+//! - [`offline`]: the offline mission (both sides in one process) run, scored and written.
 //! - [`batch`]: many runs at once (`starc eval`): rows, summaries per family, strip plots.
 //!
 //! ```no_run
@@ -25,6 +26,7 @@
 pub mod batch;
 pub mod detection;
 pub mod error;
+pub mod offline;
 pub mod overlay;
 pub mod plots;
 pub mod quantiles;

@@ -3,68 +3,35 @@
 //! mountings, the robot's per-return labels), read back, and [`Truth`], all of one run.
 
 use crate::error::{read, read_text, EvalError, Result};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use starc_hil::tum::{parse_ns, pose_at, tum_pose};
+use starc_hil::HilError;
 use starc_pipeline::ar::{read_mask_png, CameraModel};
 use std::path::{Path, PathBuf};
 
-/// (PTP ns, pose) samples of a TUM file, in time order.
-pub type Trajectory = Vec<(u64, Isometry3<f64>)>;
-
-/// Seconds with up to nine decimals (`1767225600.000000001`) as nanoseconds, exactly.
-fn parse_ns(s: &str) -> Option<u64> {
-    let (whole, frac) = s.split_once('.').unwrap_or((s, "0"));
-    if !frac.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    let mut digits = frac.to_string();
-    digits.truncate(9);
-    while digits.len() < 9 {
-        digits.push('0');
-    }
-    whole.parse::<u64>().ok()?.checked_mul(1_000_000_000)?.checked_add(digits.parse::<u64>().ok()?)
-}
-
-/// A pose from `tx ty tz qx qy qz qw`.
-fn pose(v: &[f64]) -> Option<Isometry3<f64>> {
-    let [tx, ty, tz, qx, qy, qz, qw] = v else { return None };
-    let q = UnitQuaternion::try_new(Quaternion::new(*qw, *qx, *qy, *qz), 1e-9)?;
-    Some(Isometry3::from_parts(Translation3::new(*tx, *ty, *tz), q))
-}
+pub use starc_hil::tum::Trajectory;
 
 fn bad_line(path: &Path, index: usize, expected: &'static str) -> EvalError {
     EvalError::BadLine { path: path.to_path_buf(), line: index + 1, expected }
 }
 
-/// A TUM trajectory (`time tx ty tz qx qy qz qw` per line, `#` comments); at least two poses.
+/// A TUM trajectory ([`starc_hil::tum::read_tum`]) of at least two poses.
 pub fn read_tum(path: &Path) -> Result<Trajectory> {
-    let text = read_text(path)?;
-    let mut out = Vec::new();
-    for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#')) {
-        let f: Vec<&str> = line.split_whitespace().collect();
-        let t = f.first().and_then(|s| parse_ns(s));
-        let v: Option<Vec<f64>> = f.get(1..).map(|r| r.iter().filter_map(|x| x.parse().ok()).collect());
-        match (t, v.as_deref().and_then(pose)) {
-            (Some(t), Some(p)) => out.push((t, p)),
-            _ => return Err(bad_line(path, n, "a TUM pose line: time tx ty tz qx qy qz qw")),
-        }
-    }
+    let out = starc_hil::tum::read_tum(path).map_err(|e| match e {
+        HilError::Read { path, source } => EvalError::Read { path, source },
+        HilError::TumLine { path, line, expected } => EvalError::BadLine { path, line, expected },
+        other => EvalError::BadFile { path: path.to_path_buf(), reason: other.to_string() },
+    })?;
     if out.len() < 2 {
         return Err(EvalError::BadFile { path: path.to_path_buf(), reason: "fewer than two poses".into() });
     }
     Ok(out)
 }
 
-/// The trajectory at `t`, interpolated (clamped to its ends).
+/// The trajectory at `t` ([`pose_at`]: interpolated, clamped to its ends); the identity for an
+/// empty one, which [`read_tum`] never returns.
 pub fn at(traj: &[(u64, Isometry3<f64>)], t: u64) -> Isometry3<f64> {
-    let i = traj.partition_point(|(s, _)| *s <= t).clamp(1, traj.len().saturating_sub(1).max(1));
-    match (traj.get(i - 1), traj.get(i)) {
-        (Some((ta, a)), Some((tb, b))) => {
-            let f = if tb > ta { ((t as f64 - *ta as f64) / (*tb as f64 - *ta as f64)).clamp(0.0, 1.0) } else { 0.0 };
-            a.lerp_slerp(b, f)
-        }
-        (Some((_, a)), None) => *a,
-        _ => Isometry3::identity(),
-    }
+    pose_at(traj, t).unwrap_or_else(Isometry3::identity)
 }
 
 /// One person's box at one time (people.csv).
@@ -131,7 +98,7 @@ pub fn read_frames(path: &Path) -> Result<Vec<CameraFrame>> {
         let f: Vec<&str> = line.split(',').collect();
         let v: Vec<f64> = f.iter().skip(2).filter_map(|s| s.parse().ok()).collect();
         let (Some(index), Some(t), Some(p)) =
-            (f.first().and_then(|s| s.parse::<u64>().ok()), f.get(1).and_then(|s| parse_ns(s)), pose(&v))
+            (f.first().and_then(|s| s.parse::<u64>().ok()), f.get(1).and_then(|s| parse_ns(s)), tum_pose(&v))
         else {
             return Err(bad_line(path, n, "frame,time_s,tx,ty,tz,qx,qy,qz,qw"));
         };
@@ -172,7 +139,7 @@ pub fn read_camera(path: &Path) -> Result<CameraMount> {
         return Err(bad("no camera intrinsics or fpv_lidar_camera mounting"));
     };
     let lidar_t_camera = match (t.as_slice(), q.as_slice()) {
-        ([tx, ty, tz], [qx, qy, qz, qw]) => pose(&[*tx, *ty, *tz, *qx, *qy, *qz, *qw]),
+        ([tx, ty, tz], [qx, qy, qz, qw]) => tum_pose(&[*tx, *ty, *tz, *qx, *qy, *qz, *qw]),
         _ => None,
     }
     .ok_or_else(|| bad("bad fpv_lidar_camera"))?;
@@ -363,16 +330,6 @@ pub(crate) mod tests {
         std::fs::write(file.path(), b"STARCLBL\x01\x00\x00\x00\x05").unwrap();
         assert!(matches!(PersonReturns::read(file.path()), Err(EvalError::BadFile { .. })));
         assert!(matches!(PersonReturns::read(Path::new("/nonexistent/labels_robot.bin")), Err(EvalError::Read { .. })));
-    }
-
-    #[test]
-    fn times_parse_exactly_to_the_nanosecond() {
-        assert_eq!(parse_ns("1767225600.000000001"), Some(1_767_225_600_000_000_001));
-        assert_eq!(parse_ns("1767225600.5"), Some(1_767_225_600_500_000_000));
-        assert_eq!(parse_ns("12"), Some(12_000_000_000));
-        assert_eq!(parse_ns("1.-5"), None);
-        assert_eq!(parse_ns("x.5"), None);
-        assert_eq!(parse_ns("99999999999999999999.0"), None, "overflow");
     }
 
     #[test]

@@ -1,5 +1,5 @@
 //! What the simulator writes, the readers read back equal: TUM trajectories (written by
-//! `starc_hil::sim::truth::tum_line`), and a short simulator run's people.csv, camera frames,
+//! `starc_hil::tum::tum_line`), and a short simulator run's people.csv, camera frames,
 //! camera mounting, masks and labels against the simulator's own models.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -12,8 +12,9 @@ use starc_hil::sim::lidar::LABEL_EMPTY;
 use starc_hil::sim::motion::{Motion, ResponderMotion, RobotMotion};
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
-use starc_hil::sim::truth::{read_labels, tum_line};
+use starc_hil::sim::truth::read_labels;
 use starc_hil::sim::world::World;
+use starc_hil::tum::tum_line;
 
 /// A wall with a door, someone behind it and someone in the doorway; the robot and the
 /// responder face them.

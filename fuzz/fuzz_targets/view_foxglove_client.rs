@@ -1,11 +1,8 @@
 #![no_main]
-//! The Foxglove server's parser of client messages (src/view/foxglove_proto.rs, included as
-//! is): never panics on any text, and a subscribe it accepts stays within the cap.
+//! The Foxglove server's parser of client messages (`starc_view::foxglove_proto`): never panics
+//! on any text, and a subscribe it accepts stays within the cap.
 use libfuzzer_sys::fuzz_target;
-
-#[path = "../../src/view/foxglove_proto.rs"]
-#[allow(dead_code)]
-mod foxglove_proto;
+use starc_view::foxglove_proto;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else { return };

@@ -1,12 +1,9 @@
 #![no_main]
-//! The live view's HTTP request-head parser (src/view/request.rs, included as is: the `starc`
-//! crate is a binary): never panics on any bytes a browser or attacker sends, and whatever
-//! parses is a GET or HEAD of an absolute, printable path within the caps.
+//! The live view's HTTP request-head parser (`starc_view::request`): never panics on any bytes
+//! a browser or attacker sends, and whatever parses is a GET or HEAD of an absolute, printable
+//! path within the caps.
 use libfuzzer_sys::fuzz_target;
-
-#[path = "../../src/view/request.rs"]
-#[allow(dead_code)]
-mod request;
+use starc_view::request;
 
 fuzz_target!(|data: &[u8]| {
     let end = request::head_end(data);

@@ -12,8 +12,6 @@
 
 #[path = "../../tests/support/detect_sim.rs"]
 mod detect_sim;
-#[path = "../../tests/support/tum.rs"]
-mod tum;
 
 use starc_pipeline::detect::eval::{Counts, MatchRule};
 use starc_pipeline::detect::{DetectConfig, GeometricDetector};

@@ -25,6 +25,12 @@ pub enum HilError {
     /// A scenario file that does not parse or does not make sense; `line` is 1-based.
     #[error("scenario {origin}{}: {reason}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
     Scenario { origin: String, line: Option<usize>, reason: String },
+    /// A file could not be read.
+    #[error("reading {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    /// A line of a TUM trajectory that does not parse; `line` is 1-based.
+    #[error("{path} line {line}: expected {expected}")]
+    TumLine { path: PathBuf, line: usize, expected: &'static str },
     /// Writing a simulator output failed.
     #[error("writing {path}: {reason}")]
     Output { path: PathBuf, reason: String },

@@ -10,6 +10,7 @@
 //! - [`gen`]: generated buildings (flats, offices, warehouses, halls, labs) for held-out
 //!   evaluation, with routes planned on their floor plans.
 //! - [`rng`]: the small deterministic PRNG behind every seeded choice.
+//! - [`tum`]: TUM trajectory files (written, read, interpolated).
 
 pub mod avia;
 pub mod error;
@@ -18,5 +19,6 @@ pub mod imu;
 pub mod motors;
 pub mod rng;
 pub mod sim;
+pub mod tum;
 
 pub use error::{HilError, Result};

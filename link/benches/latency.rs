@@ -27,7 +27,7 @@ fn detections(seq: u32) -> LinkMessage {
     let now = host_now_ns();
     LinkMessage::Detections {
         seq,
-        stamp_ns: now,
+        stamp: starc_time::Stamp::new(now, starc_time::Clock::Ptp),
         scan_last_packet_host_ns: now,
         sent_host_ns: now,
         people: vec![LinkPerson {

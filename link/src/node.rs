@@ -61,7 +61,9 @@ pub struct LinkReport {
     pub heartbeat_latency: Option<LatencySummary>,
     /// Detections transport latency: `sent_host_ns` to arrival (offset-corrected).
     pub detections_latency: Option<LatencySummary>,
-    /// Detections age on arrival: scan end (`stamp_ns`) to arrival (offset-corrected).
+    /// Detections age on arrival: the scan's last packet reaching the robot to the message
+    /// reaching us (robot host clock onto ours by the offset estimate). The scan's own stamp is
+    /// on the robot LiDAR's clock (PTP or free-running), which no host clock can be compared with.
     pub detections_age: Option<LatencySummary>,
     /// Messages from the peer handed to the caller, refused as damaged, dropped on a full queue.
     pub received: u64,
@@ -194,13 +196,13 @@ impl Inbox {
                 }
                 return;
             }
-            LinkMessage::Detections { stamp_ns, sent_host_ns, .. } => {
+            LinkMessage::Detections { scan_last_packet_host_ns, sent_host_ns, .. } => {
                 let (c, raw) = latency(&s, *sent_host_ns);
                 (latency_ns, raw_latency_ns) = (c, Some(raw));
                 if let Some(c) = c {
                     s.detections_latency.record(c);
                 }
-                if let (Some(c), _) = latency(&s, *stamp_ns) {
+                if let (Some(c), _) = latency(&s, *scan_last_packet_host_ns) {
                     s.detections_age.record(c);
                 }
             }

@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, LinkState, Received, Role};
 use starc_pipeline::align::{encode_tiles, TileMap, Vec3};
 use starc_pipeline::ar::OrientedBox;
+use starc_time::{Clock, Stamp};
 
 /// Map tiles of a 12 m x 4 m floor at `version`: three 4 m tiles.
 fn tiles(version: u32) -> Vec<Vec<u8>> {
@@ -24,11 +25,13 @@ fn tiles(version: u32) -> Vec<Vec<u8>> {
     encode_tiles(&pts, &nrm, 4.0, 0.01, version).unwrap().into_iter().map(|(_, b)| b).collect()
 }
 
+/// A detection of a scan whose last packet reached the robot 25 ms before sending; the scan is
+/// stamped on its LiDAR's free-running clock, 5 s after that LiDAR powered up.
 fn detections(seq: u32) -> LinkMessage {
     let now = host_now_ns();
     LinkMessage::Detections {
         seq,
-        stamp_ns: now - 30_000_000,
+        stamp: Stamp::new(5_000_000_000, Clock::Device),
         scan_last_packet_host_ns: now - 25_000_000,
         sent_host_ns: now,
         people: vec![LinkPerson {
@@ -56,7 +59,7 @@ async fn every_kind_arrives_and_decodes() {
 
     let pose =
         Isometry3::from_parts(Translation3::new(1.0, 2.0, 0.3), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7));
-    robot.publish(&LinkMessage::RobotPose { stamp_ns: 123, world_t_lidar: pose }).await.unwrap();
+    robot.publish(&LinkMessage::RobotPose { stamp: Stamp::new(123, Clock::Ptp), world_t_lidar: pose }).await.unwrap();
     let sent_detections = detections(1);
     robot.publish(&sent_detections).await.unwrap();
     let tile = tiles(1).remove(0);
@@ -69,11 +72,11 @@ async fn every_kind_arrives_and_decodes() {
     })
     .await;
     let pose_back = got.iter().find_map(|r| match r.msg {
-        LinkMessage::RobotPose { stamp_ns, world_t_lidar } => Some((stamp_ns, world_t_lidar)),
+        LinkMessage::RobotPose { stamp, world_t_lidar } => Some((stamp, world_t_lidar)),
         _ => None,
     });
     let (stamp, back) = pose_back.expect("no pose");
-    assert_eq!(stamp, 123);
+    assert_eq!(stamp, Stamp::new(123, Clock::Ptp));
     assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
     let det = got.iter().find(|r| matches!(r.msg, LinkMessage::Detections { .. })).expect("no detections");
     assert_eq!(det.msg, sent_detections);
@@ -92,6 +95,33 @@ async fn every_kind_arrives_and_decodes() {
     let report = rig.health();
     assert_eq!(report.decode_errors, 0);
     assert!(report.detections_latency.is_some() || det.latency_ns.is_none());
+    robot.close().await.unwrap();
+    rig.close().await.unwrap();
+}
+
+/// The age of a detection is measured on the robot's host clock (last packet to arrival), never
+/// from the scan's LiDAR stamp, whose clock (PTP or the LiDAR's own) no host clock matches.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn detections_age_is_measured_on_host_clocks() {
+    let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
+    let mut rig = LinkNode::open(&rig_cfg(port), Role::Rig).await.unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
+    assert!(wait_for(Duration::from_secs(3), || rig.health().clock.is_some()).await, "no clock offset");
+    // Detections are droppable: send one every 50 ms until one has been aged, 5 s at most.
+    let mut aged = false;
+    for seq in 0..100 {
+        robot.publish(&detections(seq)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        while rig.try_recv().is_some() {}
+        aged = rig.health().detections_age.is_some_and(|a| a.count > 0);
+        if aged {
+            break;
+        }
+    }
+    assert!(aged, "no detection aged: {:?}", rig.health());
+    let age = rig.health().detections_age.unwrap();
+    // 25 ms before sending, plus loopback transport and the offset's error.
+    assert!((20_000_000..1_000_000_000).contains(&age.p50_ns), "{age:?}");
     robot.close().await.unwrap();
     rig.close().await.unwrap();
 }

@@ -10,6 +10,7 @@ use std::time::Duration;
 use common::{collect, fast, open_listening, rig_cfg, robot_cfg, wait_up};
 use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkState, Role, TlsConfig};
+use starc_time::{Clock, Stamp};
 
 fn openssl(dir: &Path, args: &[&str]) {
     let out = Command::new("/usr/bin/openssl").args(args).current_dir(dir).output().expect("openssl CLI");
@@ -97,7 +98,8 @@ async fn tls_link_with_a_private_ca_and_a_stranger_refused() {
     // Poses are droppable, and "up" comes from heartbeats, which can arrive before the rig's pose
     // subscription has reached the robot: a busy host may lose the first one, so a round that
     // brings nothing is sent again, five rounds at most.
-    let pose = LinkMessage::RobotPose { stamp_ns: host_now_ns(), world_t_lidar: Isometry3::identity() };
+    let pose =
+        LinkMessage::RobotPose { stamp: Stamp::new(host_now_ns(), Clock::Ptp), world_t_lidar: Isometry3::identity() };
     let mut got = Vec::new();
     for _round in 0..5 {
         robot.publish(&pose).await.unwrap();
@@ -130,14 +132,25 @@ async fn access_control_denies_one_key() {
     let (robot, port) = open_listening(robot_cfg, Role::Robot).await;
     let mut rig = LinkNode::open(&LinkConfig { zenoh_config: Some(path), ..rig_cfg(port) }, Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
-    let probe =
-        LinkMessage::Detections { seq: 9, stamp_ns: 1, scan_last_packet_host_ns: 2, sent_host_ns: 3, people: vec![] };
+    let probe = LinkMessage::Detections {
+        seq: 9,
+        stamp: Stamp::new(1, Clock::Ptp),
+        scan_last_packet_host_ns: 2,
+        sent_host_ns: 3,
+        people: vec![],
+    };
     // Poses, then detections; this test is about the denial, so a round whose detections a busy
     // host dropped (they are droppable) is simply sent again, three rounds at most.
     let mut got = Vec::new();
     for _round in 0..3 {
         for i in 0..5 {
-            robot.publish(&LinkMessage::RobotPose { stamp_ns: i, world_t_lidar: Isometry3::identity() }).await.unwrap();
+            robot
+                .publish(&LinkMessage::RobotPose {
+                    stamp: Stamp::new(i, Clock::Ptp),
+                    world_t_lidar: Isometry3::identity(),
+                })
+                .await
+                .unwrap();
         }
         robot.publish(&probe).await.unwrap();
         got.extend(collect(&mut rig, Duration::from_secs(1), |g| g.iter().any(|r| r.msg == probe)).await);

@@ -22,6 +22,7 @@
 mod align_sim;
 
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use starc_hil::tum::pose_at;
 use starc_pipeline::align::{aggregate_window, pose_error, AggregateStats, AlignConfig, Aligner, Vec3, WindowConfig};
 use starc_pipeline::lio::{Lio, LioConfig, LioScan, ScanOutput};
 use starc_pipeline::pose::{Constraint, PoseBuffer, WorldPose, WorldPoseConfig};
@@ -80,8 +81,8 @@ fn main() {
     std::fs::create_dir_all(&out_dir).unwrap();
 
     let sim = align_sim::simulate(scenario, duration_s, "drift");
-    let target = starc_pipeline::align::voxel_downsample(
-        &align_sim::accumulate(&sim.robot.scans, 0, u64::MAX, |t| align_sim::truth_at(&sim.robot_truth, t)),
+    let target = starc_pipeline::voxel_hash::voxel_downsample(
+        &align_sim::accumulate(&sim.robot.scans, 0, u64::MAX, |t| pose_at(&sim.robot_truth, t).unwrap()),
         0.05,
     );
     let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
@@ -153,7 +154,7 @@ fn main() {
         let w_ns = if aligned { window_ns } else { first_window_ns };
         if now >= first + w_ns && now >= next_registration {
             let src = window(&sim.fpv.scans, &odom, now, w_ns, &mut window_stats);
-            let truth = align_sim::truth_at(&sim.fpv_truth, now);
+            let truth = pose_at(&sim.fpv_truth, now).unwrap();
             let report = match corrected.world_pose(now).ok().flatten() {
                 // First registration: a hand-off guess, the truth off by STARC_DRIFT_GUESS_M and
                 // _DEG (the seed search only with STARC_DRIFT_FIRST_SEARCH).
@@ -203,7 +204,7 @@ fn main() {
                 max_step_m = max_step_m.max(step.step_m);
                 max_step_deg = max_step_deg.max(step.step_deg);
                 let t = now.min(next_frame.max(first));
-                let truth = align_sim::truth_at(&sim.fpv_truth, t);
+                let truth = pose_at(&sim.fpv_truth, t).unwrap();
                 if let (Ok(Some(a)), Ok(Some(b))) = (lio_only.world_pose(t), corrected.world_pose(t)) {
                     let (lm, ld) = pose_error(&a, &truth);
                     let (cm, cd) = pose_error(&b, &truth);

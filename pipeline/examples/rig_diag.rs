@@ -6,16 +6,12 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use starc_hil::tum::{pose_at, read_tum};
 use starc_pipeline::align::{pose_error, AlignConfig, Attempt};
 use starc_pipeline::lio::{ImuSample, LioScan};
 use starc_pipeline::mission::{RigCore, RigCoreConfig, RobotCore, RobotCoreConfig};
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
-
-#[path = "../../tests/support/avia_decode.rs"]
-mod avia_decode;
-#[path = "../../tests/support/tum.rs"]
-mod tum;
 
 enum Ev {
     Imu(bool, ImuSample),
@@ -28,11 +24,11 @@ fn main() {
     let hint_m: f64 = args.get(2).map_or(1.0, |a| a.parse().unwrap());
     let hint_deg: f64 = args.get(3).map_or(20.0, |a| a.parse().unwrap());
     let gate_m: f64 = std::env::var("GATE_M").map_or(2.0, |v| v.parse().unwrap());
-    let gt_robot = tum::read_tum(&dir.join("gt_robot.tum"));
-    let gt_fpv = tum::read_tum(&dir.join("gt_fpv.tum"));
+    let gt_robot = read_tum(&dir.join("gt_robot.tum")).unwrap();
+    let gt_fpv = read_tum(&dir.join("gt_fpv.tum")).unwrap();
     let pcap = dir.join("avia.pcap");
-    let robot = avia_decode::decode(&pcap, Ipv4Addr::new(192, 168, 1, 101));
-    let rig = avia_decode::decode(&pcap, Ipv4Addr::new(192, 168, 2, 102));
+    let robot = starc_bridge::decode_avia(&pcap, Ipv4Addr::new(192, 168, 1, 101)).unwrap();
+    let rig = starc_bridge::decode_avia(&pcap, Ipv4Addr::new(192, 168, 2, 102)).unwrap();
     let mut evs: Vec<(u64, Ev)> = Vec::new();
     evs.extend(robot.imu.into_iter().map(|s| (s.t_ns, Ev::Imu(true, s))));
     evs.extend(robot.scans.into_iter().map(|s| (s.end_ns, Ev::Scan(true, s))));
@@ -61,7 +57,7 @@ fn main() {
         }
         for st in rsteps.drain(..) {
             if lio_t_world.is_none() {
-                lio_t_world = Some(st.output.lidar_pose * tum::truth_at(&gt_robot, st.output.end_ns).inverse());
+                lio_t_world = Some(st.output.lidar_pose * pose_at(&gt_robot, st.output.end_ns).unwrap().inverse());
             }
         }
         for o in routs.drain(..) {
@@ -72,7 +68,7 @@ fn main() {
                     Translation3::new(0.8 * hint_m, -0.6 * hint_m, 0.0),
                     UnitQuaternion::from_euler_angles(0.0, 0.0, hint_deg.to_radians()),
                 );
-                core.set_start_hint(l_t_w * tum::truth_at(&gt_fpv, first) * off);
+                core.set_start_hint(l_t_w * pose_at(&gt_fpv, first).unwrap() * off);
                 hint_set = true;
             }
             if core.wants_map() && rc.map_len() != core.map_len() {
@@ -80,7 +76,7 @@ fn main() {
             }
             let Some(job) = core.next_job(Vec::new) else { continue };
             let end = job.end_ns;
-            let truth = l_t_w * tum::truth_at(&gt_fpv, end);
+            let truth = l_t_w * pose_at(&gt_fpv, end).unwrap();
             let t_s = (end - first) as f64 * 1e-9;
             let truth_job = job.clone();
             let o = job.run().unwrap();

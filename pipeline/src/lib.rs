@@ -23,6 +23,7 @@ pub mod pose;
 pub mod record;
 #[cfg(test)]
 mod test_rng;
+pub mod timing;
 pub mod voxel_hash;
 
 pub use error::PipelineError;

@@ -1,7 +1,7 @@
 //! `starc demo`: Avia mock devices and the live driver against each other on loopback.
 //!
-//! The main job until the simulated mission exists: it shows what a host sees from real Avias
-//! (discovery, handshake, setup, points, IMU, loss, sync), with nothing but this program.
+//! It shows what a host sees from real Avias (discovery, handshake, setup, points, IMU, loss,
+//! sync), with nothing but this program.
 
 use super::rates::Rates;
 use super::runtime;

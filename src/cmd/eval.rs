@@ -6,11 +6,10 @@
 //! No truth reaches the pipeline unless `--hint truth` says so: the rig's first alignment is
 //! seeded at the world origin with no gate, as a responder who enters anywhere would be.
 
-use super::mission::{run_offline, Offline, Start};
-use super::mission_input;
 use anyhow::{bail, Context};
 use nalgebra::Isometry3;
 use starc_eval::batch::{flatten, markdown_table, print_summary, summarize, write_plots, Row};
+use starc_eval::offline::{self, Offline, Start};
 use starc_hil::gen;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
 use starc_pipeline::mission::RobotCoreConfig;
@@ -233,12 +232,13 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
 
 fn mission_offline(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
     let truth = starc_eval::Truth::load(dir)?;
-    let inputs = mission_input::from_capture(&dir.join("avia.pcap"))?;
+    let inputs =
+        starc_bridge::from_capture(&dir.join("avia.pcap"), super::mission::ROBOT_AVIA, super::mission::FPV_AVIA)?;
     let (start, start_gate_m) = match args.hint {
         Hint::None => (Start::At(Isometry3::identity()), f64::INFINITY),
         Hint::Truth => (Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 }, 2.0),
     };
-    run_offline(
+    offline::run(
         inputs,
         Offline {
             out: out.to_path_buf(),
@@ -249,8 +249,10 @@ fn mission_offline(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
             start_gate_m,
             robot: robot_config(args),
             truth: Some(truth),
+            wall_timing: true,
         },
-    )
+    )?;
+    Ok(())
 }
 
 fn robot_config(args: &Args) -> RobotCoreConfig {
@@ -270,7 +272,7 @@ fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
             Hint::Truth => Some((1.0, 20.0)),
         },
         start_gate_m: 2.0,
-        view: crate::view::ViewConfig::default(),
+        view: starc_view::ViewConfig::default(),
     };
     super::sim_live::run(dir, &opts)
 }

@@ -19,7 +19,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if super::lio_input::is_mcap(&args.file) {
+    if starc_bridge::is_mcap(&args.file) {
         return run_mcap(&args);
     }
     let mut cap = capture::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;

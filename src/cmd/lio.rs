@@ -14,9 +14,13 @@
 //! and `lio.json`, the summary (timing median and p99, health counts, memory).
 
 use super::export::{DeviceKey, DeviceSelector};
-use super::lio_input::{internal_imu, is_mcap, lio_scan, read_external_imu, recorded, Recorded};
 use anyhow::{bail, Context};
 use serde::Serialize;
+use starc_bridge::external_imu::read_external_imu;
+use starc_bridge::is_mcap;
+use starc_bridge::livox::{lio_scan, packet_imu};
+use starc_bridge::recorded::{recorded, Recorded};
+use starc_eval::offline::peak_rss_mib;
 use starc_hil::sim::truth::tum_line;
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
@@ -212,14 +216,6 @@ fn quantile_ms(sorted_us: &[u64], q: f64) -> f64 {
     sorted_us.get(i).map_or(0.0, |&v| v as f64 * 1e-3)
 }
 
-/// Peak resident memory of this process, MiB (Linux).
-pub fn peak_rss_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
-}
-
 fn load_config(path: Option<&Path>) -> anyhow::Result<LioFile> {
     let Some(path) = path else { return Ok(LioFile::default()) };
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -288,7 +284,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 ext_next += 1;
             }
         }
-        if let Some(s) = internal_imu(&packet) {
+        if let Some(s) = packet_imu(&packet) {
             if external.is_none() {
                 dev.push_imu(s, &mut outs);
             }

@@ -1,10 +1,7 @@
 //! `starc replay FILE --to udp://HOST:PORT`: sends a capture's datagrams to a UDP socket with their
 //! original spacing (scaled by `--rate`), e.g. into a running driver or pipeline.
 //!
-//! `starc replay ROBOT.mcap [FPV.mcap] --out DIR [--fpv-config fpv.toml] [--truth SIM_DIR]`:
-//! reruns the pipeline on the nodes' recordings (both sides, offline, in time order; see
-//! `mission.rs`): trajectories, alignments, detections and AR frames; scored into report.json
-//! when the simulator's truth is given.
+//! (Rerunning the pipeline on the nodes' MCAP recordings is `starc rerun`.)
 //!
 //! Timing: datagram k is sent at `start + (t_k - t_0) / rate`, sleeping until that instant (never
 //! spinning); a late sender catches up without drifting. pcap/pcapng use capture times, .lvx the
@@ -15,7 +12,6 @@ use starc_livox::capture::{self, Datagram};
 use starc_livox::control::RawFrame;
 use starc_livox::data::DataPacket;
 use starc_livox::ports::DEVICE_CMD_PORT;
-use starc_pipeline::mission::RobotCoreConfig;
 use starc_time::Stamp;
 use std::io::Write;
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
@@ -37,26 +33,11 @@ pub enum Only {
 
 #[derive(clap::Args, Clone, Debug)]
 pub struct Args {
-    /// Capture file (pcap, pcapng or .lvx), or an MCAP recording of a node.
+    /// Capture file (pcap, pcapng or .lvx).
     pub file: PathBuf,
-    /// More MCAP recordings (the other node's), merged with the first by time.
-    pub more: Vec<PathBuf>,
     /// Destination of a capture's datagrams, udp://HOST:PORT.
     #[arg(long, value_name = "udp://HOST:PORT")]
     pub to: Option<String>,
-    /// Recordings: where the rerun writes (default: next to the first recording, `replay/`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Recordings: the rig node's config (camera, expected start); default: the shipped camera
-    /// and the robot's start.
-    #[arg(long)]
-    pub fpv_config: Option<PathBuf>,
-    /// Recordings of a `starc sim` run: its directory, to score the rerun against the truth.
-    #[arg(long)]
-    pub truth: Option<PathBuf>,
-    /// Recordings: write every Nth AR frame as PNG (0: none).
-    #[arg(long, default_value_t = 5)]
-    pub frames_every: u64,
     /// Speed factor: 2 plays twice as fast, 0.5 at half speed, 0 as fast as possible.
     #[arg(long, default_value_t = 1.0)]
     pub rate: f64,
@@ -114,11 +95,11 @@ impl Report {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if super::lio_input::is_mcap(&args.file) {
-        return rerun(&args);
-    }
-    if !args.more.is_empty() {
-        bail!("only MCAP recordings can be replayed together; a capture goes alone");
+    if starc_bridge::is_mcap(&args.file) {
+        bail!(
+            "{} is a node's MCAP recording: rerun the pipeline on it with `starc rerun FILE...`",
+            args.file.display()
+        );
     }
     let report = replay(&args)?;
     let mut out = std::io::stdout().lock();
@@ -127,57 +108,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Parses `udp://HOST:PORT` and resolves it; refuses non-loopback addresses unless allowed.
-/// Reruns the pipeline on node recordings (see the module documentation).
-fn rerun(args: &Args) -> anyhow::Result<()> {
-    use super::mission::{run_offline, Offline, Start};
-    use crate::node::config::{load, CameraMountConfig, FpvNodeConfig};
-    let mut files = vec![args.file.clone()];
-    files.extend(args.more.iter().cloned());
-    let out = args.out.clone().unwrap_or_else(|| args.file.with_file_name("replay"));
-    let inputs = super::mission_input::from_recordings(&files)?;
-    let run = match (&args.truth, &args.fpv_config) {
-        (Some(dir), _) => {
-            let truth = starc_eval::Truth::load(dir)?;
-            Offline {
-                out,
-                frames_every: args.frames_every,
-                camera: truth.mount.camera.clone(),
-                lidar_t_camera: truth.mount.lidar_t_camera,
-                start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
-                start_gate_m: 2.0,
-                robot: RobotCoreConfig::default(),
-                truth: Some(truth),
-            }
-        }
-        (None, config) => {
-            let cfg: Option<FpvNodeConfig> = config.as_deref().map(load).transpose()?;
-            let camera = match &cfg {
-                Some(c) => c.camera.clone(),
-                None => CameraMountConfig {
-                    model: starc_pipeline::ar::CameraModel::default(),
-                    translation_m: [0.0; 3],
-                    quaternion_xyzw: [-0.5, 0.5, -0.5, 0.5],
-                },
-            };
-            Offline {
-                out,
-                frames_every: args.frames_every,
-                lidar_t_camera: camera.lidar_t_camera()?,
-                camera: camera.model,
-                start: Start::At(
-                    cfg.as_ref()
-                        .and_then(|c| c.expected_start)
-                        .map_or_else(nalgebra::Isometry3::identity, |s| s.isometry()),
-                ),
-                start_gate_m: cfg.as_ref().map_or(2.0, |c| c.start_gate_m),
-                robot: RobotCoreConfig::default(),
-                truth: None,
-            }
-        }
-    };
-    run_offline(inputs, run)
-}
-
 pub fn destination(url: &str, allow_remote: bool) -> anyhow::Result<SocketAddr> {
     let Some(rest) = url.strip_prefix("udp://") else {
         bail!("destination must look like udp://HOST:PORT, got {url:?}");
@@ -337,20 +267,7 @@ mod tests {
     }
 
     fn args(file: PathBuf, to: String, rate: f64, only: Only) -> Args {
-        Args {
-            file,
-            more: Vec::new(),
-            to: Some(to),
-            out: None,
-            fpv_config: None,
-            truth: None,
-            frames_every: 5,
-            rate,
-            loops: 1,
-            only,
-            max_gap: 10.0,
-            allow_remote: false,
-        }
+        Args { file, to: Some(to), rate, loops: 1, only, max_gap: 10.0, allow_remote: false }
     }
 
     #[test]

@@ -137,7 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frames_every: args.frames_every,
             start_hint: Some((1.0, 20.0)),
             start_gate_m: 2.0,
-            view: crate::view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
+            view: starc_view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
         };
         super::sim_live::run(&args.out, &opts)?;
     }

@@ -4,13 +4,13 @@
 //! driver, the link between them over zenoh on tcp/127.0.0.1, and everything the nodes do scored
 //! against the simulator's truth into report.json (mode "live").
 
-use super::lio::peak_rss_mib;
 use super::mission::{FPV_AVIA, ROBOT_AVIA};
 use crate::node::config::{CameraMountConfig, FpvNodeConfig, RobotNodeConfig, StartPose};
 use crate::node::fpv::{self, FpvEvent};
 use crate::node::robot::{self, RobotEvent};
 use anyhow::{bail, Context};
 use nalgebra::{Isometry3, UnitQuaternion};
+use starc_eval::offline::peak_rss_mib;
 use starc_eval::{summary, LatencyReport, MemoryReport, Scorer, Truth};
 use starc_hil::avia::{CaptureSource, MockAvia, MockAviaConfig};
 use starc_hil::sim::truth::tum_line;
@@ -45,7 +45,7 @@ pub struct LiveOptions {
     /// With a hint: a first alignment farther than this from it is refused.
     pub start_gate_m: f64,
     /// The rig node's live views (browser, Foxglove) while the mission runs.
-    pub view: crate::view::ViewConfig,
+    pub view: starc_view::ViewConfig,
 }
 
 /// Free loopback ports for the nodes: each socket is held until every port is chosen, so that

@@ -108,7 +108,7 @@ pub struct FpvNodeConfig {
     #[serde(default = "yes")]
     pub shared_lidar_clock: bool,
     #[serde(default)]
-    pub view: crate::view::ViewConfig,
+    pub view: starc_view::ViewConfig,
     /// Record the rig's points, IMU, world pose and AR frames here.
     #[serde(default)]
     pub record: Option<PathBuf>,

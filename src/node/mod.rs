@@ -9,19 +9,20 @@ pub mod fpv;
 pub mod recording;
 pub mod robot;
 
-use crate::cmd::lio_input::lio_scan;
-use nalgebra::Vector3;
 use recording::NodeRecorder;
-use starc_livox::live::{ImuReading, LivoxEvent};
+use starc_bridge::livox::{lio_scan, reading_imu};
+use starc_livox::live::LivoxEvent;
 use starc_pipeline::lio::{ImuSample, LioScan};
+use starc_time::Clock;
 use std::net::Ipv4Addr;
 use tokio::sync::watch;
 
 /// What a node takes from its LiDAR.
 pub enum Fed {
-    /// A scan, with the host time its last packet arrived.
+    /// A scan, the clock its points are stamped on, and the host time its last packet arrived.
     Scan {
         scan: LioScan,
+        clock: Clock,
         last_host_ns: Option<u64>,
     },
     Imu(ImuSample),
@@ -43,14 +44,18 @@ impl LidarFeed {
     pub fn take(&mut self, ev: LivoxEvent, recorder: Option<&mut NodeRecorder>) -> Option<Fed> {
         match ev {
             LivoxEvent::Scan { ip, scan } if *self.ours.get_or_insert(ip) == ip => {
-                let fed = Fed::Scan { scan: lio_scan(&scan), last_host_ns: scan.last_host_receive.map(|s| s.ns) };
+                let fed = Fed::Scan {
+                    scan: lio_scan(&scan),
+                    clock: scan.start.clock,
+                    last_host_ns: scan.last_host_receive.map(|s| s.ns),
+                };
                 if let Some(r) = recorder {
                     r.scan(scan);
                 }
                 Some(fed)
             }
             LivoxEvent::Imu(r) if *self.ours.get_or_insert(r.ip) == r.ip => {
-                let s = imu_sample(&r);
+                let s = reading_imu(&r);
                 if let Some(rec) = recorder {
                     rec.imu(&s);
                 }
@@ -66,15 +71,6 @@ impl LidarFeed {
             }
             _ => None,
         }
-    }
-}
-
-/// An Avia IMU reading as the LIO takes it (on the LiDAR's clock, acceleration in m/s²).
-pub fn imu_sample(r: &ImuReading) -> ImuSample {
-    ImuSample {
-        t_ns: r.device_time.ns,
-        gyro_rad_s: Vector3::from(r.sample.gyro_rad_s.map(f64::from)),
-        acc_m_s2: Vector3::from(r.sample.acc_m_s2().map(f64::from)),
     }
 }
 

@@ -8,7 +8,6 @@
 //! the node; chunks close every second, so a crash leaves a readable file, and `finish` (on
 //! SIGINT/SIGTERM or the end of a run) writes the index. Dropping the recorder finishes it too.
 
-use crate::view::ViewSnapshot;
 use nalgebra::Isometry3;
 use starc_livox::scan::Scan;
 use starc_pipeline::lio::ImuSample;
@@ -16,6 +15,7 @@ use starc_pipeline::mission::RobotDetection;
 use starc_pipeline::record::msgs::{Pose, Quaternion, Vector3};
 use starc_pipeline::record::{Frames, PersonBox, Recorder, RecorderOptions, RecorderStats};
 use starc_time::{Clock, Stamp};
+use starc_view::ViewSnapshot;
 use std::path::Path;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::Arc;

@@ -6,10 +6,11 @@ use super::config::{lio_config, RobotNodeConfig};
 use super::recording::NodeRecorder;
 use super::{wait_stop, Fed, LidarFeed, Stop};
 use anyhow::Context;
-use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, Role};
+use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::LivoxDriver;
 use starc_pipeline::detect::WindowPoint;
-use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep};
+use starc_pipeline::mission::{people_to_send, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep};
+use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -51,7 +52,8 @@ pub async fn run(
     let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
     tracing::info!(host = ?driver.host, "robot node up");
     let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
-    let mut scan_hosts: VecDeque<(u64, u64)> = VecDeque::new();
+    // Each recent scan's end, its LiDAR's clock, and when its last packet arrived (host clock).
+    let mut scan_hosts: VecDeque<(u64, Clock, u64)> = VecDeque::new();
     let mut steps: Vec<RobotStep> = Vec::new();
     let mut summary = RobotSummary::default();
     let mut seq = 0u32;
@@ -74,8 +76,8 @@ pub async fn run(
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
                 match feed.take(ev, recorder.as_mut()) {
-                    Some(Fed::Scan { scan, last_host_ns }) => {
-                        scan_hosts.push_back((scan.end_ns, last_host_ns.unwrap_or_else(host_now_ns)));
+                    Some(Fed::Scan { scan, clock, last_host_ns }) => {
+                        scan_hosts.push_back((scan.end_ns, clock, last_host_ns.unwrap_or_else(host_now_ns)));
                         if scan_hosts.len() > 64 {
                             scan_hosts.pop_front();
                         }
@@ -94,22 +96,12 @@ pub async fn run(
                 for step in steps.drain(..) {
                     // The detection leaves first: it is what the latency is measured on.
                     if let Some(det) = step.detection {
-                        let last_packet_host_ns = scan_hosts.iter().find(|(end, _)| *end == det.stamp_ns).map_or_else(host_now_ns, |(_, h)| *h);
+                        let (clock, last_packet_host_ns) = scan_of(&scan_hosts, det.stamp_ns);
                         seq = seq.wrapping_add(1);
-                        let people = det
-                            .people
-                            .iter()
-                            .zip(&det.scores)
-                            .filter_map(|(p, score)| {
-                                Some(LinkPerson {
-                                    score: *score as f32,
-                                    bbox: p.bbox?,
-                                    points_world: p.points_world.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect(),
-                                })
-                            })
-                            .collect();
+                        let people = people_to_send(&det);
                         let sent_host_ns = host_now_ns();
-                        let msg = LinkMessage::Detections { seq, stamp_ns: det.stamp_ns, scan_last_packet_host_ns: last_packet_host_ns, sent_host_ns, people };
+                        let stamp = Stamp::new(det.stamp_ns, clock);
+                        let msg = LinkMessage::Detections { seq, stamp, scan_last_packet_host_ns: last_packet_host_ns, sent_host_ns, people };
                         link.publish(&msg).await?;
                         summary.detections_sent += 1;
                         if let Some(r) = recorder.as_mut() {
@@ -120,7 +112,8 @@ pub async fn run(
                         }
                     }
                     let o = &step.output;
-                    link.publish(&LinkMessage::RobotPose { stamp_ns: o.end_ns, world_t_lidar: o.lidar_pose }).await?;
+                    let stamp = Stamp::new(o.end_ns, scan_of(&scan_hosts, o.end_ns).0);
+                    link.publish(&LinkMessage::RobotPose { stamp, world_t_lidar: o.lidar_pose }).await?;
                     if let Some(r) = recorder.as_mut() {
                         r.pose(o.end_ns, &o.lidar_pose);
                     }
@@ -149,9 +142,15 @@ pub async fn run(
     }
     let _ = driver.stop().await;
     link.close().await?;
-    summary.peak_rss_mib = crate::cmd::lio::peak_rss_mib();
+    summary.peak_rss_mib = starc_eval::offline::peak_rss_mib();
     tracing::info!(?summary, "robot node down");
     Ok(summary)
+}
+
+/// The clock and last-packet host time of the scan ending at `end_ns` (an unknown scan: PTP, as
+/// the Avia's points are once a grandmaster runs, and now).
+fn scan_of(scans: &VecDeque<(u64, Clock, u64)>, end_ns: u64) -> (Clock, u64) {
+    scans.iter().find(|(end, ..)| *end == end_ns).map_or_else(|| (Clock::Ptp, host_now_ns()), |(_, c, h)| (*c, *h))
 }
 
 type MapThread = std::thread::JoinHandle<anyhow::Result<()>>;

@@ -1,4 +1,4 @@
-"""A Foxglove WebSocket client (PyPI `websockets`) for tests/view_foxglove.rs.
+"""A Foxglove WebSocket client (PyPI `websockets`) for view/tests/view_foxglove.rs.
 
 Connects with subprotocol foxglove.websocket.v1, reads serverInfo and advertise, then:
   receive URL N TOPIC...  subscribe to TOPICs, read until N message frames arrived per topic,

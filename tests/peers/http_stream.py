@@ -1,5 +1,5 @@
 """Reads N parts of a multipart/x-mixed-replace stream with Python's http.client, as a browser
-would, for tests/view_http.rs. Prints JSON: the response's Content-Type and each part's
+would, for view/tests/view_http.rs. Prints JSON: the response's Content-Type and each part's
 Content-Type and body (hex)."""
 
 import http.client

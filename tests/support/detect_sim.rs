@@ -1,16 +1,16 @@
 //! The person detector against the simulator's truth: a run's robot returns read back from its
 //! pcap (as a real capture), moved into the world with the true pose at each firing, joined with
 //! their labels; windows of them fed to a detector and matched against people.csv.
-//! Shared by tests/detect_sim.rs and benches/detect.rs (which declare `mod tum;` beside it);
-//! it reads the truth itself (tum.rs, people.csv) because starc-hil's bench cannot depend on
+//! Shared by tests/detect_sim.rs and starc-hil's benches/detect.rs; it reads people.csv itself
+//! (and the trajectory with `starc_hil::tum`) because starc-hil's bench cannot depend on
 //! starc-eval, which depends on starc-hil.
 
-use super::tum::{read_tum, truth_at};
 use nalgebra::{Point3, Vector3};
 use starc_hil::sim::lidar::LABEL_EMPTY;
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::truth::read_labels;
+use starc_hil::tum::{pose_at, read_tum};
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson};
@@ -49,7 +49,7 @@ pub struct SimRun {
 }
 
 pub fn load(dir: &Path) -> SimRun {
-    let truth = read_tum(&dir.join("gt_robot.tum"));
+    let truth = read_tum(&dir.join("gt_robot.tum")).unwrap();
     let labels: HashMap<u64, Vec<u16>> =
         read_labels(&std::fs::read(dir.join("labels_robot.bin")).unwrap()).unwrap().into_iter().collect();
     let people = std::fs::read_to_string(dir.join("people.csv"))
@@ -84,8 +84,11 @@ pub fn load(dir: &Path) -> SimRun {
         let l = labels[&t0].iter().copied().filter(|&x| x != LABEL_EMPTY);
         for (p, label) in decoded.iter().zip(l) {
             let t = t0 + u64::from(p.offset_ns);
-            let w =
-                truth_at(&truth, t).transform_point(&Point3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)));
+            let w = pose_at(&truth, t).unwrap().transform_point(&Point3::new(
+                f64::from(p.x_m),
+                f64::from(p.y_m),
+                f64::from(p.z_m),
+            ));
             points.push(WindowPoint { x_m: w.x as f32, y_m: w.y as f32, z_m: w.z as f32, t_ns: t });
             out_labels.push(label);
         }
@@ -135,7 +138,7 @@ pub fn window_at(run: &SimRun, end: u64, window_ns: u64) -> (DetectWindow<'_>, &
     let b = run.points.partition_point(|p| p.t_ns < end);
     let window = DetectWindow {
         stamp: Stamp::new(end, Clock::Ptp),
-        sensor_pose: truth_at(&run.truth, end),
+        sensor_pose: pose_at(&run.truth, end).unwrap(),
         points: &run.points[a..b],
     };
     (window, &run.labels[a..b])

@@ -68,8 +68,8 @@ impl LatencyModel {
 
 /// Maps host-clock stamps onto another clock (the LiDAR's PTP time).
 ///
-/// The PTP clock model (drivers/time) can implement this later; until then [`LinearClockMap`]
-/// takes an offset and skew from wherever they are known (e.g. `phc2sys` statistics).
+/// [`LinearClockMap`] takes an offset and skew from wherever they are known (e.g. `phc2sys`
+/// statistics); a fitted clock model (drivers/time) can implement it as well.
 pub trait HostClockMap: Send + Sync {
     /// `host` (on [`Clock::Host`]) on the target clock, or `None` while the map is unknown.
     fn map(&self, host: Stamp) -> Option<Stamp>;

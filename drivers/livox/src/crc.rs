@@ -1,8 +1,8 @@
 //! The two CRCs of the Livox SDK1 control protocol.
 //!
 //! The SDK seeds standard reflected tables with odd constants; expressed as Rocksoft models they
-//! are plain CRC-16/CCITT and CRC-32 with non-standard initial values (checked below against the
-//! check values in docs/protocols.md).
+//! are plain CRC-16/CCITT and CRC-32 with non-standard initial values. Each model's `check` is its
+//! CRC of `123456789`, the Rocksoft convention; the test below verifies both.
 
 use crc::{Algorithm, Crc};
 
@@ -46,7 +46,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn check_values_match_the_protocol_notes() {
+    fn check_values_are_the_crcs_of_123456789() {
         assert_eq!(crc16(b"123456789"), 0xAB4E);
         assert_eq!(crc32(b"123456789"), 0xB08D_B5B1);
     }

@@ -8,7 +8,7 @@
 //!   sockets) and the tokio loop that drives a port.
 //!
 //! Written here rather than on the `statime` crate: statime keeps its message types private
-//! (so we could not fuzz or reuse its codec), and its port always steers a `Clock`, while
+//! (so its codec cannot be fuzzed or reused), and its port always steers a `Clock`, while
 //! STARC's default slave must measure without ever adjusting one.
 
 pub mod error;

@@ -1,9 +1,9 @@
-//! Ground-truth files: TUM trajectories, per-point labels, people's boxes, and the buffered
-//! writer they share (so that a failed write names its file).
+//! Ground-truth files: per-point labels, people's boxes, and the buffered writer they and the
+//! TUM trajectories ([`crate::tum`]) share (so that a failed write names its file).
 
 use crate::error::{HilError, Result};
 use crate::sim::lidar::PacketLabels;
-use nalgebra::Isometry3;
+pub use crate::tum::tum_line;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -44,24 +44,6 @@ impl OutFile {
 
 pub fn out_err(path: &Path, e: impl std::fmt::Display) -> HilError {
     HilError::Output { path: path.to_path_buf(), reason: e.to_string() }
-}
-
-/// One TUM line: `time tx ty tz qx qy qz qw`, time in seconds.
-pub fn tum_line(time_ns: u64, pose: &Isometry3<f64>) -> String {
-    let t = pose.translation.vector;
-    let q = pose.rotation.coords; // (i, j, k, w)
-    format!(
-        "{}.{:09} {:.6} {:.6} {:.6} {:.9} {:.9} {:.9} {:.9}",
-        time_ns / 1_000_000_000,
-        time_ns % 1_000_000_000,
-        t.x,
-        t.y,
-        t.z,
-        q.x,
-        q.y,
-        q.z,
-        q.w
-    )
 }
 
 /// One packet's record of the labels file (see [`LabelsWriter`]); `None` past 65535 returns.
@@ -136,12 +118,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn tum_lines_and_labels_round_trip() {
-        let pose = Isometry3::translation(1.0, -2.0, 0.5);
-        assert_eq!(
-            tum_line(1_767_225_600_000_000_001, &pose),
-            "1767225600.000000001 1.000000 -2.000000 0.500000 0.000000000 0.000000000 0.000000000 1.000000000"
-        );
+    fn labels_round_trip() {
         let dir = std::env::temp_dir().join(format!("starc-labels-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&dir);
         let path = dir.join("l.bin");

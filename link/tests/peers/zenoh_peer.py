@@ -16,7 +16,7 @@ import zenoh
 
 def rig_heartbeat(seq: int) -> bytes:
     payload = struct.pack("<B3xIQI", 2, seq, time.time_ns(), 0)
-    frame = struct.pack("<4sBBHI", b"STLK", 1, 1, 0, len(payload)) + payload
+    frame = struct.pack("<4sBBHI", b"STLK", 2, 1, 0, len(payload)) + payload
     return frame + struct.pack("<I", zlib.crc32(frame))
 
 

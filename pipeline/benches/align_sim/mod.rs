@@ -5,16 +5,18 @@
 use nalgebra::{Isometry3, Point3};
 use starc_hil::sim::run::{run, SimOptions, FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_hil::sim::scenario::Scenario;
-use starc_pipeline::align::{voxel_downsample, Ray, Vec3};
+use starc_hil::tum::{pose_at, read_tum};
+use starc_pipeline::align::{Ray, Vec3};
 use starc_pipeline::lio::{LioScan, TimedPoint};
+use starc_pipeline::voxel_hash::voxel_downsample;
 use std::path::PathBuf;
 
-#[path = "../../../tests/support/tum.rs"]
-mod tum;
-pub use tum::{read_tum, truth_at};
-#[path = "../../../tests/support/avia_decode.rs"]
-mod avia_decode;
-pub use avia_decode::{decode, Decoded};
+pub use starc_bridge::AviaInputs as Decoded;
+
+/// One Avia's inputs from a simulator capture (panics on a bad capture: benches only).
+pub fn decode(pcap: &std::path::Path, avia: std::net::Ipv4Addr) -> Decoded {
+    starc_bridge::decode_avia(pcap, avia).unwrap()
+}
 
 /// One simulator run's outputs.
 pub struct SimRun {
@@ -38,8 +40,8 @@ pub fn simulate(scenario: &str, duration_s: f64, tag: &str) -> SimRun {
     run(&sc, &text, &opts, &mut |_, _| {}).unwrap();
     let pcap = dir.join("avia.pcap");
     SimRun {
-        robot_truth: read_tum(&dir.join("gt_robot.tum")),
-        fpv_truth: read_tum(&dir.join("gt_fpv.tum")),
+        robot_truth: read_tum(&dir.join("gt_robot.tum")).unwrap(),
+        fpv_truth: read_tum(&dir.join("gt_fpv.tum")).unwrap(),
         robot: decode(&pcap, ROBOT_AVIA_IP),
         fpv: decode(&pcap, FPV_AVIA_IP),
         dir,
@@ -106,12 +108,13 @@ pub fn sim_pair(scenario: &str, duration_s: f64, t_end_s: f64, window_s: f64) ->
     let sim = simulate(scenario, duration_s, "grid");
     let t0 = sim.robot_truth.first().map_or(0, |t| t.0);
     let end = t0 + (t_end_s * 1e9) as u64;
-    let target = voxel_downsample(&accumulate(&sim.robot.scans, 0, u64::MAX, |t| truth_at(&sim.robot_truth, t)), 0.05);
-    let at_end = truth_at(&sim.fpv_truth, end);
+    let target =
+        voxel_downsample(&accumulate(&sim.robot.scans, 0, u64::MAX, |t| pose_at(&sim.robot_truth, t).unwrap()), 0.05);
+    let at_end = pose_at(&sim.fpv_truth, end).unwrap();
     let inv = at_end.inverse();
     let from = end.saturating_sub((window_s * 1e9) as u64);
-    let source = accumulate(&sim.fpv.scans, from, end, |t| inv * truth_at(&sim.fpv_truth, t));
-    let rays = rays(&sim.fpv.scans, from, end, 97, |t| inv * truth_at(&sim.fpv_truth, t));
+    let source = accumulate(&sim.fpv.scans, from, end, |t| inv * pose_at(&sim.fpv_truth, t).unwrap());
+    let rays = rays(&sim.fpv.scans, from, end, 97, |t| inv * pose_at(&sim.fpv_truth, t).unwrap());
     let describe = format!(
         "`{scenario}`, seed 1, {duration_s} s: robot map of {} scans (5 cm voxels); rig window {window_s} s ending at t = {t_end_s} s (rig at {:.2}, {:.2}, {:.2} m)",
         sim.robot.scans.len(),

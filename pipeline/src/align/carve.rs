@@ -10,7 +10,8 @@
 //! voxels are not hit in every half second that rays graze them.)
 
 use super::free_space::Ray;
-use super::geometry::{key_of, Key, KeyMap, Vec3};
+use super::geometry::Vec3;
+use crate::voxel_hash::{key_of, Key, KeyMap};
 
 /// A ray longer than this many voxels is walked only this far (a bound on the work per ray).
 const MAX_STEPS: usize = 4096;

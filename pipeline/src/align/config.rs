@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Alignment settings. Defaults were tuned on the real scan pair in `shared/data/registration`
+/// Alignment settings. The defaults fit the real scan pair in `shared/data/registration`
 /// (a 360-degree spinning LiDAR, about 69k points per scan, ranges up to tens of metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -131,6 +131,9 @@ pub struct AlignConfig {
     pub free_space_step_m: f64,
     pub free_space_near_m: f64,
     pub free_space_end_margin_m: f64,
+    /// The clock of the report's compute times (not a setting of the file).
+    #[serde(skip)]
+    pub stopwatch: crate::timing::Stopwatch,
 }
 
 impl Default for AlignConfig {
@@ -188,6 +191,7 @@ impl Default for AlignConfig {
             free_space_step_m: 0.1,
             free_space_near_m: 0.5,
             free_space_end_margin_m: 0.3,
+            stopwatch: crate::timing::Stopwatch::Wall,
         }
     }
 }

@@ -4,10 +4,11 @@
 //! through the map's walls and seats on their way to the points they hit. At the right pose a
 //! ray crosses no mapped surface before its end.
 
-use super::geometry::{key_of, KeyMap, Vec3};
+use super::geometry::Vec3;
+use crate::timing::Stopwatch;
+use crate::voxel_hash::{key_of, KeyMap};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
-use std::time::Instant;
 
 /// One LiDAR ray of the source: from the sensor's position when it fired to the point it hit,
 /// both in the source's frame.
@@ -44,6 +45,8 @@ pub struct RayParams {
     /// through registration error and map noise, and a ray grazing the floor towards a far
     /// point crosses its bumps with the end still on the floor.
     pub end_margin_m: f64,
+    /// The clock of [`FreeSpace::ms`].
+    pub stopwatch: Stopwatch,
 }
 
 /// A small plane patch of the map: a point and its unit normal.
@@ -94,7 +97,7 @@ impl SurfelGrid {
     /// Walks every checked ray, moved by `pose` (source into map), and counts those that cross
     /// a surface before their end.
     pub fn check(&self, rays: &[Ray], pose: &Isometry3<f64>, p: &RayParams) -> FreeSpace {
-        let t0 = Instant::now();
+        let t0 = p.stopwatch.start();
         let step = p.step_m.max(0.01);
         let stride =
             if p.max_rays > 0 && rays.len() > p.max_rays { rays.len() as f64 / p.max_rays as f64 } else { 1.0 };
@@ -123,7 +126,7 @@ impl SurfelGrid {
             }
         }
         out.blocked_ratio = if out.rays > 0 { out.blocked as f64 / out.rays as f64 } else { 0.0 };
-        out.ms = t0.elapsed().as_secs_f64() * 1e3;
+        out.ms = t0.ms();
         out
     }
 }
@@ -146,7 +149,7 @@ mod tests {
     }
 
     fn params() -> RayParams {
-        RayParams { max_rays: 100, step_m: 0.1, near_m: 0.5, end_margin_m: 0.3 }
+        RayParams { max_rays: 100, step_m: 0.1, near_m: 0.5, end_margin_m: 0.3, stopwatch: Stopwatch::Wall }
     }
 
     #[test]

@@ -1,18 +1,10 @@
-//! Points, voxel keys, the voxel downsampler and the voxel-hash neighbour index.
+//! Points, poses and the voxel-hash neighbour index (on the grid of [`crate::voxel_hash`]).
 
 use crate::cloud::PointCloud;
-use crate::voxel_hash::{floor_i32, gap2, VoxelHashMap, NEIGHBOURS};
+use crate::voxel_hash::{gap2, key_of, Key, KeyMap, NEIGHBOURS};
 use nalgebra::{Isometry3, Matrix3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 
 pub type Vec3 = Vector3<f64>;
-pub type Key = (i32, i32, i32);
-
-pub type KeyMap<V> = VoxelHashMap<Key, V>;
-
-/// Voxel of a point; coordinates beyond ±2^31 cells saturate (harmless: such points match nothing).
-pub fn key_of(p: &Vec3, inv_cell_m: f64) -> Key {
-    (floor_i32(p.x * inv_cell_m), floor_i32(p.y * inv_cell_m), floor_i32(p.z * inv_cell_m))
-}
 
 /// The finite, non-zero points of a cloud in f64.
 pub fn cloud_points(cloud: &PointCloud) -> Vec<Vec3> {
@@ -22,51 +14,6 @@ pub fn cloud_points(cloud: &PointCloud) -> Vec<Vec3> {
         .filter(|p| !p.is_zero() && p.x_m.is_finite() && p.y_m.is_finite() && p.z_m.is_finite())
         .map(|p| Vec3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)))
         .collect()
-}
-
-/// One point per occupied voxel (the centroid), in a deterministic order (sorted by voxel).
-pub fn voxel_downsample(points: &[Vec3], voxel_m: f64) -> Vec<Vec3> {
-    voxel_downsample_every(points, voxel_m, 1)
-}
-
-/// [`voxel_downsample`] of every `stride`-th point (a window of millions of returns puts dozens
-/// in every voxel of the ICP's size: a share of them gives the same voxels for a share of the
-/// time).
-pub fn voxel_downsample_every(points: &[Vec3], voxel_m: f64, stride: usize) -> Vec<Vec3> {
-    if voxel_m.is_nan() || voxel_m <= 0.0 {
-        return points.to_vec();
-    }
-    let mut means = VoxelMeans::new(voxel_m);
-    for p in points.iter().step_by(stride.max(1)) {
-        means.add(p);
-    }
-    means.finish()
-}
-
-/// [`voxel_downsample`] of points given one at a time (no buffer of them all).
-pub struct VoxelMeans {
-    inv: f64,
-    sums: KeyMap<(Vec3, u32)>,
-}
-
-impl VoxelMeans {
-    /// Voxels of `voxel_m` (at least 1 mm).
-    pub fn new(voxel_m: f64) -> Self {
-        Self { inv: 1.0 / voxel_m.max(1e-3), sums: KeyMap::default() }
-    }
-
-    pub fn add(&mut self, p: &Vec3) {
-        let e = self.sums.entry(key_of(p, self.inv)).or_insert((Vec3::zeros(), 0));
-        e.0 += p;
-        e.1 += 1;
-    }
-
-    /// One point per voxel, the mean of its points, in voxel order.
-    pub fn finish(self) -> Vec<Vec3> {
-        let mut cells: Vec<(Key, Vec3)> = self.sums.into_iter().map(|(k, (s, n))| (k, s / f64::from(n))).collect();
-        cells.sort_unstable_by_key(|c| c.0);
-        cells.into_iter().map(|c| c.1).collect()
-    }
 }
 
 /// Points bucketed by voxel for radius-bounded neighbour queries (the 27 cells around a query).

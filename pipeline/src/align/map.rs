@@ -8,7 +8,8 @@
 
 use super::carve::seen_through;
 use super::free_space::Ray;
-use super::geometry::{estimate_normals, key_of, voxel_downsample, KeyMap, Vec3, VoxelMeans};
+use super::geometry::{estimate_normals, Vec3};
+use crate::voxel_hash::{key_of, voxel_downsample, KeyMap, VoxelMeans};
 use crate::PipelineError;
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};

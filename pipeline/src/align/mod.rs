@@ -22,13 +22,12 @@ mod ndt;
 mod register;
 mod tiles;
 
+pub(crate) use crate::voxel_hash::key_of;
 pub use carve::seen_through;
 pub use config::AlignConfig;
 pub use free_space::{FreeSpace, Ray};
-pub(crate) use geometry::key_of;
 pub use geometry::{
-    cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, voxel_downsample,
-    voxel_downsample_every, Vec3, VoxelIndex,
+    cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, Vec3, VoxelIndex,
 };
 pub use map::{
     aggregate_window, filter_window, floor_and_ceiling, prepare_map, AggregateStats, ExclusionBox, MapPrepConfig,

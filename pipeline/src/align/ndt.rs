@@ -7,7 +7,8 @@
 //! iteratively re-weighted least squares on `rᵀ Σ⁻¹ r` with weight `-d1 d2 exp(..)`, which is what
 //! [`refine_level`] does, with a backtracking step so the score never gets worse.
 
-use super::geometry::{exp_se3, key_of, KeyMap, Vec3};
+use super::geometry::{exp_se3, Vec3};
+use crate::voxel_hash::{key_of, KeyMap};
 use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, Vector6};
 
 /// Normal distribution of the target points in one cell (mean and inverse covariance).

@@ -3,13 +3,14 @@
 
 use super::config::AlignConfig;
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
-use super::geometry::{estimate_normals, pose_rows, voxel_downsample, voxel_downsample_every, Vec3, VoxelIndex};
+use super::geometry::{estimate_normals, pose_rows, Vec3, VoxelIndex};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
+use crate::timing::Lap;
+use crate::voxel_hash::{voxel_downsample, voxel_downsample_every};
 use crate::PipelineError;
 use nalgebra::{Isometry3, UnitQuaternion};
 use serde::Serialize;
-use std::time::Instant;
 
 /// Quality of one attempt's result (all measured on the ICP-reduced source).
 #[derive(Clone, Debug, Serialize)]
@@ -181,14 +182,10 @@ pub struct Aligner {
 /// corridor's axis) is left to ICP.
 const SETTLE_MIN_TRANSLATION_SHARE: f64 = 0.9;
 
-fn ms_since(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
-}
-
 impl Aligner {
     pub fn new(target: &[Vec3], config: AlignConfig) -> Result<Self, PipelineError> {
         config.validate()?;
-        let t0 = Instant::now();
+        let t0 = config.stopwatch.start();
         let ndt_target = voxel_downsample(target, config.ndt_target_voxel_m);
         let grids: Vec<NdtGrid> =
             config.ndt_resolutions_m.iter().map(|&r| NdtGrid::new(&ndt_target, r, config.ndt_outlier_ratio)).collect();
@@ -206,7 +203,7 @@ impl Aligner {
                 reason: format!("too few points ({}) to align against", target.len()),
             });
         }
-        Ok(Self { config, grids, icp_target: IcpTarget { index, normals }, surfels, prepare_ms: ms_since(t0) })
+        Ok(Self { config, grids, icp_target: IcpTarget { index, normals }, surfels, prepare_ms: t0.ms() })
     }
 
     pub fn config(&self) -> &AlignConfig {
@@ -231,30 +228,30 @@ impl Aligner {
         // product below (and scale the points it turns): renormalised first.
         let initial =
             &Isometry3::from_parts(initial.translation, UnitQuaternion::new_normalize(*initial.rotation.quaternion()));
-        let t0 = Instant::now();
+        let t0 = self.config.stopwatch.start();
         // Finest reduction first; the coarser ones are taken from it (cheaper than from the raw scan).
         let stride = if c.source_max_points == 0 { 1 } else { source.len().div_ceil(c.source_max_points).max(1) };
         let icp_source = voxel_downsample_every(source, c.icp_voxel_m, stride);
         let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
-        let source_reduce_ms = ms_since(t0);
+        let source_reduce_ms = t0.ms();
         let first_level = self.first_level(&ndt_source);
         let src = Sources { ndt: &ndt_source, icp: &icp_source, rays };
         let mut attempts = Vec::new();
         let mut seeds = Vec::new();
         let mut seed_ms = 0.0;
         if c.reseed_yaw_step_deg > 0.0 {
-            let t1 = Instant::now();
+            let t1 = self.config.stopwatch.start();
             let seed_source = thin(voxel_downsample(&icp_source, c.seed_source_voxel_m), c.seed_max_points);
             seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
-            seed_ms = ms_since(t1);
+            seed_ms = t1.ms();
             let mut tried: Vec<Isometry3<f64>> = Vec::new();
             self.try_seeds(&seeds, &src, first_level, &mut tried, &mut attempts);
             // Nothing passed from the guess's position: search again at positions around it.
             let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
             if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
-                let t2 = Instant::now();
+                let t2 = self.config.stopwatch.start();
                 let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
-                seed_ms += ms_since(t2);
+                seed_ms += t2.ms();
                 let before = attempts.len();
                 self.try_seeds(&more, &src, first_level, &mut tried, &mut attempts);
                 if attempts.len() == before {
@@ -330,7 +327,7 @@ impl Aligner {
         a: &mut Attempt,
     ) {
         let c = &self.config;
-        let t0 = Instant::now();
+        let t0 = self.config.stopwatch.start();
         let source = thin(src.icp.to_vec(), c.verify_max_points);
         let params = self.icp_params();
         let here = icp::refine(&self.icp_target, &source, a.pose, &IcpParams { max_iterations: 0, ..params });
@@ -388,7 +385,7 @@ impl Aligner {
                 break;
             }
         }
-        a.verify_ms += ms_since(t0);
+        a.verify_ms += t0.ms();
     }
 
     fn ray_params(&self) -> RayParams {
@@ -398,6 +395,7 @@ impl Aligner {
             step_m: c.free_space_step_m,
             near_m: c.free_space_near_m,
             end_margin_m: c.free_space_end_margin_m,
+            stopwatch: c.stopwatch,
         }
     }
 
@@ -423,7 +421,7 @@ impl Aligner {
         source_points: usize,
         source_reduce_ms: f64,
         seed_ms: f64,
-        t0: Instant,
+        t0: Lap,
     ) -> AlignReport {
         let better = |a: &Attempt, b: &Attempt| {
             (a.accepted, a.metrics.inlier_ratio, -a.metrics.rms_residual_m)
@@ -457,7 +455,7 @@ impl Aligner {
             source_reduce_ms,
             seeds,
             seed_ms,
-            total_ms: ms_since(t0),
+            total_ms: t0.ms(),
             attempts,
             failure,
         }
@@ -533,7 +531,7 @@ impl Aligner {
         seed_shift_m: [f64; 2],
     ) -> Attempt {
         let c = &self.config;
-        let t0 = Instant::now();
+        let t0 = self.config.stopwatch.start();
         let mut pose = *seed;
         let mut ndt_iterations = Vec::with_capacity(self.grids.len());
         for grid in self.grids.iter().skip(first_level) {
@@ -541,8 +539,8 @@ impl Aligner {
             pose = level.pose;
             ndt_iterations.push(level.iterations);
         }
-        let ndt_ms = ms_since(t0);
-        let t1 = Instant::now();
+        let ndt_ms = t0.ms();
+        let t1 = self.config.stopwatch.start();
         let params = self.icp_params();
         let mut r = icp::refine(&self.icp_target, src.icp, pose, &params);
         // A degenerate result that explains (nearly) the whole source, so that no misfit drags
@@ -555,12 +553,12 @@ impl Aligner {
                 r = icp::refine(&self.icp_target, src.icp, settled, &params);
             }
         }
-        let icp_ms = ms_since(t1);
+        let icp_ms = t1.ms();
         let (mut rejected_because, mut pinned) = self.judge(&r, src.icp);
         // Consistency check: from starts around the result, ICP must not settle elsewhere with a
         // clearly lower residual (a neighbouring minimum passes every other test: 9.7 cm off in
         // the office grid). When one does, ICP continues from there (at most `verify_hops` times).
-        let t2 = Instant::now();
+        let t2 = self.config.stopwatch.start();
         let mut probes = Vec::new();
         let mut verify_hops = 0;
         if rejected_because.is_empty() && c.verify_shift_m > 0.0 {
@@ -609,7 +607,7 @@ impl Aligner {
                 c.free_space_max_blocked * 100.0
             ));
         }
-        let verify_ms = ms_since(t2);
+        let verify_ms = t2.ms();
         Attempt {
             seed_yaw_offset_deg,
             seed_shift_m,

@@ -1,6 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
+use crate::voxel_hash::{voxel_downsample, voxel_downsample_every};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use std::path::PathBuf;
 

@@ -21,7 +21,8 @@
 //! At 1 cm steps a 4 m tile holds coordinates up to 400 steps: u16 leaves room for tiles up to
 //! 655 m at 1 cm. 10 bytes per point against 24 (three f64) or 48 with normals.
 
-use super::geometry::{key_of, Key, KeyMap, Vec3};
+use super::geometry::Vec3;
+use crate::voxel_hash::{key_of, Key, KeyMap};
 use crate::PipelineError;
 
 const MAGIC: &[u8; 4] = b"STMT";

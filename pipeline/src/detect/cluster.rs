@@ -2,15 +2,13 @@
 //! components, and plane peeling for clusters that hold a person and the wall, table or box
 //! they touch.
 
-use crate::voxel_hash::{floor_i32, VoxelHashMap, VoxelHashSet};
+use crate::voxel_hash::{key_of, Key, KeyMap, VoxelHashSet};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
-
-type KeyMap<V> = VoxelHashMap<[i32; 3], V>;
 
 /// One occupied voxel: the mean of its points (x, y, height above floor).
 #[derive(Clone, Copy, Debug)]
 pub struct Voxel {
-    pub key: [i32; 3],
+    pub key: Key,
     pub centre: Vector3<f64>,
 }
 
@@ -31,9 +29,9 @@ impl Grid {
         let mut map: KeyMap<u32> = KeyMap::default();
         let mut voxel_of = Vec::with_capacity(points.len());
         let mut sums: Vec<(Vector3<f64>, u32)> = Vec::new();
-        let mut keys: Vec<[i32; 3]> = Vec::new();
+        let mut keys: Vec<Key> = Vec::new();
         for (_, p) in points {
-            let key = [floor_i32(p.x * inv), floor_i32(p.y * inv), floor_i32(p.z * inv)];
+            let key = key_of(p, inv);
             let next = keys.len() as u32;
             let v = *map.entry(key).or_insert(next);
             if v == next {
@@ -111,9 +109,9 @@ impl Grid {
         let mut parent: Vec<u32> = (0..subset.len() as u32).collect();
         for (i, &v) in subset.iter().enumerate() {
             let Some(vox) = self.voxels.get(v as usize) else { continue };
-            let [x, y, z] = vox.key;
+            let (x, y, z) = vox.key;
             for (dx, dy, dz) in FORWARD {
-                if let Some(&j) = local.get(&[x.wrapping_add(dx), y.wrapping_add(dy), z.wrapping_add(dz)]) {
+                if let Some(&j) = local.get(&(x.wrapping_add(dx), y.wrapping_add(dy), z.wrapping_add(dz))) {
                     union(&mut parent, i as u32, j);
                 }
             }
@@ -284,13 +282,9 @@ pub fn drop_tall_columns(grid: &Grid, cluster: &[u32], low_m: f64, min_low_share
     if (low as f64) < min_low_share * cluster.len() as f64 {
         return None;
     }
-    let tall: VoxelHashSet<[i32; 2]> = cluster
-        .iter()
-        .filter_map(|&v| centre(v))
-        .filter(|c| c.centre.z >= low_m)
-        .map(|c| [c.key[0], c.key[1]])
-        .collect();
+    let tall: VoxelHashSet<(i32, i32)> =
+        cluster.iter().filter_map(|&v| centre(v)).filter(|c| c.centre.z >= low_m).map(|c| (c.key.0, c.key.1)).collect();
     let rest: Vec<u32> =
-        cluster.iter().copied().filter(|&v| centre(v).is_some_and(|c| !tall.contains(&[c.key[0], c.key[1]]))).collect();
+        cluster.iter().copied().filter(|&v| centre(v).is_some_and(|c| !tall.contains(&(c.key.0, c.key.1)))).collect();
     (!rest.is_empty() && rest.len() < cluster.len()).then_some(rest)
 }

@@ -5,7 +5,7 @@ use crate::PipelineError;
 use serde::{Deserialize, Serialize};
 
 /// Settings of [`crate::detect::GeometricDetector`]. Heights are above the estimated floor;
-/// lengths in metres. The defaults were tuned on the simulator's four shipped scenarios (seed 1;
+/// lengths in metres. The defaults are fitted to the simulator's four shipped scenarios (seed 1;
 /// seed 2, other noise on the same scenes, checks them): see docs/detect.md.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -30,9 +30,9 @@ impl FovEnvelope {
             max_elevation_deg: [f64::NEG_INFINITY; BINS],
             from_ns: stamp_ns.saturating_sub(RECENT_NS),
         };
-        // Every recent point: at the sides of the view the rosette's upper edge falls steeply and
-        // is swept by few returns, and one point in four put the edge on the head of a person
-        // sitting there (the lab at 25.3 s).
+        // Every recent point, not a subsample: at the sides of the view the rosette's upper edge
+        // falls steeply and is swept by few returns, and a subsample can put the edge on the head
+        // of a person sitting there.
         for p in points.iter().filter(|p| p.t_ns >= env.from_ns) {
             if let Some((bin, el)) = env.angles(p) {
                 if let Some(m) = env.max_elevation_deg.get_mut(bin) {

@@ -5,7 +5,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 4 | magic `STLK` |
-//! | 1 | format version (1) |
+//! | 1 | format version (2) |
 //! | 1 | kind (1 heartbeat, 2 clock probe, 3 clock reply, 4 robot pose, 5 detections, 6 map tile) |
 //! | 2 | reserved (0) |
 //! | 4 | payload length n (at most [`MAX_MESSAGE_BYTES`] for the whole frame) |
@@ -19,9 +19,12 @@
 //! | heartbeat | u8 role (1 robot, 2 rig), 3 reserved (0), u32 seq, u64 sent_host_ns, u32 map_tiles |
 //! | clock probe | u32 seq, u64 t1_ns |
 //! | clock reply | u32 seq, u64 t1_ns, t2_ns, t3_ns |
-//! | robot pose | u64 stamp_ns, f64 x, y, z, f64 qi, qj, qk, qw (world_T_lidar) |
-//! | detections | u32 seq, u64 stamp_ns, u64 scan_last_packet_host_ns, u64 sent_host_ns, u32 people; per person: f32 score, f64 centre x, y, z, f64 length, width, height, f64 yaw_rad, u32 points, then f32 x, y, z per point (world) |
+//! | robot pose | u64 stamp_ns, u8 stamp clock, f64 x, y, z, f64 qi, qj, qk, qw (world_T_lidar) |
+//! | detections | u32 seq, u64 stamp_ns, u8 stamp clock, u64 scan_last_packet_host_ns, u64 sent_host_ns, u32 people; per person: f32 score, f64 centre x, y, z, f64 length, width, height, f64 yaw_rad, u32 points, then f32 x, y, z per point (world) |
 //! | map tile | one tile of `align::tiles`, byte for byte (it has its own version and CRC) |
+//!
+//! A stamp clock is 1 device (free-running), 2 PTP, 3 GPS, 4 PPS, 5 host: a robot LiDAR stamp
+//! travels with the clock it was read on, so the rig never takes one clock's time for another's.
 //!
 //! Bounded: a frame is at most [`MAX_MESSAGE_BYTES`], a detections message holds at most
 //! [`MAX_PEOPLE`] people and [`MAX_POINTS_PER_MESSAGE`] points; every count is checked against
@@ -34,9 +37,10 @@ use crate::align::decode_tile;
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{Detection, WindowPoint};
 use crate::PipelineError;
+use starc_time::{Clock, Stamp};
 
 const MAGIC: &[u8; 4] = b"STLK";
-const VERSION: u8 = 1;
+const VERSION: u8 = 2;
 /// Frame header: magic, version, kind, reserved, payload length.
 pub const HEADER_LEN: usize = 12;
 const CRC_LEN: usize = 4;
@@ -138,12 +142,13 @@ pub enum LinkMessage {
     /// The answer: the probe's `t1_ns`, the answerer's clock at receiving it (`t2_ns`) and at
     /// sending this reply (`t3_ns`). The prober adds `t4` on receipt.
     ClockReply { seq: u32, t1_ns: u64, t2_ns: u64, t3_ns: u64 },
-    /// The robot's LiDAR pose in the map (world) frame at `stamp_ns`.
-    RobotPose { stamp_ns: u64, world_t_lidar: Isometry3<f64> },
-    /// People found in one scan window: `stamp_ns` is the scan's end, `scan_last_packet_host_ns`
-    /// when its last packet arrived, `sent_host_ns` when this message left (all robot host clock),
-    /// so the rig can split the end-to-end latency into detection and transport.
-    Detections { seq: u32, stamp_ns: u64, scan_last_packet_host_ns: u64, sent_host_ns: u64, people: Vec<LinkPerson> },
+    /// The robot's LiDAR pose in the map (world) frame at `stamp` (the robot LiDAR's clock).
+    RobotPose { stamp: Stamp, world_t_lidar: Isometry3<f64> },
+    /// People found in one scan window: `stamp` is the scan's end on the robot LiDAR's clock,
+    /// `scan_last_packet_host_ns` when its last packet arrived and `sent_host_ns` when this
+    /// message left (both robot host clock), so the rig can split the end-to-end latency into
+    /// detection and transport.
+    Detections { seq: u32, stamp: Stamp, scan_last_packet_host_ns: u64, sent_host_ns: u64, people: Vec<LinkPerson> },
     /// One tile of the map in the `align::tiles` format (apply it with `align::TileMap::apply`).
     MapTile { bytes: Vec<u8> },
 }
@@ -179,6 +184,17 @@ fn finite(values: &[f64], what: &str) -> Result<(), PipelineError> {
     }
 }
 
+fn put_stamp(p: &mut Vec<u8>, stamp: &Stamp) {
+    p.extend_from_slice(&stamp.ns.to_le_bytes());
+    p.push(match stamp.clock {
+        Clock::Device => 1,
+        Clock::Ptp => 2,
+        Clock::Gps => 3,
+        Clock::Pps => 4,
+        Clock::Host => 5,
+    });
+}
+
 /// Encodes one message into a frame. Refuses (typed error) what the decoder would refuse:
 /// non-finite numbers, more than [`MAX_PEOPLE`] people or [`MAX_POINTS_PER_MESSAGE`] points,
 /// a damaged map tile, a frame over [`MAX_MESSAGE_BYTES`].
@@ -208,18 +224,18 @@ pub fn encode(m: &LinkMessage) -> Result<Vec<u8>, PipelineError> {
             }
             KIND_CLOCK_REPLY
         }
-        LinkMessage::RobotPose { stamp_ns, world_t_lidar } => {
+        LinkMessage::RobotPose { stamp, world_t_lidar } => {
             let t = world_t_lidar.translation.vector;
             let q = world_t_lidar.rotation.quaternion().coords; // i, j, k, w
             let values = [t.x, t.y, t.z, q.x, q.y, q.z, q.w];
             finite(&values, "robot pose")?;
-            p.extend_from_slice(&stamp_ns.to_le_bytes());
+            put_stamp(&mut p, stamp);
             for v in values {
                 p.extend_from_slice(&v.to_le_bytes());
             }
             KIND_ROBOT_POSE
         }
-        LinkMessage::Detections { seq, stamp_ns, scan_last_packet_host_ns, sent_host_ns, people } => {
+        LinkMessage::Detections { seq, stamp, scan_last_packet_host_ns, sent_host_ns, people } => {
             if people.len() > MAX_PEOPLE {
                 return Err(bad(format!("{} people (at most {MAX_PEOPLE})", people.len())));
             }
@@ -229,7 +245,8 @@ pub fn encode(m: &LinkMessage) -> Result<Vec<u8>, PipelineError> {
             }
             p.reserve(32 + people.len() * PERSON_HEADER_LEN + points * POINT_LEN);
             p.extend_from_slice(&seq.to_le_bytes());
-            for t in [stamp_ns, scan_last_packet_host_ns, sent_host_ns] {
+            put_stamp(&mut p, stamp);
+            for t in [scan_last_packet_host_ns, sent_host_ns] {
                 p.extend_from_slice(&t.to_le_bytes());
             }
             p.extend_from_slice(&(people.len() as u32).to_le_bytes());
@@ -305,6 +322,19 @@ impl<'a> Reader<'a> {
 
     fn u32(&mut self, what: &'static str) -> Result<u32, PipelineError> {
         self.array(what).map(u32::from_le_bytes)
+    }
+
+    fn stamp(&mut self) -> Result<Stamp, PipelineError> {
+        let ns = self.u64("stamp_ns")?;
+        let clock = match self.u8("stamp clock")? {
+            1 => Clock::Device,
+            2 => Clock::Ptp,
+            3 => Clock::Gps,
+            4 => Clock::Pps,
+            5 => Clock::Host,
+            other => return Err(bad(format!("unknown stamp clock {other}"))),
+        };
+        Ok(Stamp::new(ns, clock))
     }
 
     fn u64(&mut self, what: &'static str) -> Result<u64, PipelineError> {
@@ -410,7 +440,7 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
             t3_ns: r.u64("t3_ns")?,
         },
         KIND_ROBOT_POSE => {
-            let stamp_ns = r.u64("stamp_ns")?;
+            let stamp = r.stamp()?;
             let mut v = [0.0; 7];
             for x in v.iter_mut() {
                 *x = r.f64("pose")?;
@@ -421,11 +451,11 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
                 return Err(bad(format!("pose rotation is not a unit quaternion (norm {})", q.norm())));
             }
             let world_t_lidar = Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::new_normalize(q));
-            LinkMessage::RobotPose { stamp_ns, world_t_lidar }
+            LinkMessage::RobotPose { stamp, world_t_lidar }
         }
         KIND_DETECTIONS => {
             let seq = r.u32("seq")?;
-            let stamp_ns = r.u64("stamp_ns")?;
+            let stamp = r.stamp()?;
             let scan_last_packet_host_ns = r.u64("scan_last_packet_host_ns")?;
             let sent_host_ns = r.u64("sent_host_ns")?;
             let count = r.u32("people")? as usize;
@@ -458,7 +488,7 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
                 let bbox = OrientedBox { centre_m: Vector3::new(cx, cy, cz), size_m: Vector3::new(l, w, h), yaw_rad };
                 people.push(LinkPerson { score, bbox, points_world });
             }
-            LinkMessage::Detections { seq, stamp_ns, scan_last_packet_host_ns, sent_host_ns, people }
+            LinkMessage::Detections { seq, stamp, scan_last_packet_host_ns, sent_host_ns, people }
         }
         KIND_MAP_TILE => {
             let bytes = r.take(r.remaining(), "map tile")?;

@@ -30,7 +30,7 @@ fn every_kind() -> Vec<LinkMessage> {
         LinkMessage::ClockProbe { seq: 3, t1_ns: 11 },
         LinkMessage::ClockReply { seq: 3, t1_ns: 11, t2_ns: 22, t3_ns: 33 },
         LinkMessage::RobotPose {
-            stamp_ns: 99,
+            stamp: Stamp::new(99, Clock::Ptp),
             world_t_lidar: Isometry3::from_parts(
                 Translation3::new(1.0, -2.0, 0.5),
                 UnitQuaternion::from_euler_angles(0.1, -0.2, 2.5),
@@ -38,12 +38,18 @@ fn every_kind() -> Vec<LinkMessage> {
         },
         LinkMessage::Detections {
             seq: 5,
-            stamp_ns: 1000,
+            stamp: Stamp::new(1000, Clock::Ptp),
             scan_last_packet_host_ns: 1010,
             sent_host_ns: 1030,
             people: vec![person(2000, 1.0), person(0, 2.0), person(17, 3.0)],
         },
-        LinkMessage::Detections { seq: 6, stamp_ns: 1, scan_last_packet_host_ns: 2, sent_host_ns: 3, people: vec![] },
+        LinkMessage::Detections {
+            seq: 6,
+            stamp: Stamp::new(1, Clock::Device),
+            scan_last_packet_host_ns: 2,
+            sent_host_ns: 3,
+            people: vec![],
+        },
         LinkMessage::MapTile { bytes: tile_bytes() },
     ]
 }
@@ -51,8 +57,8 @@ fn every_kind() -> Vec<LinkMessage> {
 fn same(a: &LinkMessage, b: &LinkMessage) -> bool {
     match (a, b) {
         (
-            LinkMessage::RobotPose { stamp_ns: s1, world_t_lidar: p1 },
-            LinkMessage::RobotPose { stamp_ns: s2, world_t_lidar: p2 },
+            LinkMessage::RobotPose { stamp: s1, world_t_lidar: p1 },
+            LinkMessage::RobotPose { stamp: s2, world_t_lidar: p2 },
         ) => {
             s1 == s2
                 && (p1.translation.vector - p2.translation.vector).norm() == 0.0
@@ -60,6 +66,27 @@ fn same(a: &LinkMessage, b: &LinkMessage) -> bool {
         }
         _ => a == b,
     }
+}
+
+#[test]
+fn a_stamp_keeps_its_clock_and_an_unknown_clock_is_refused() {
+    let m = LinkMessage::Detections {
+        seq: 1,
+        stamp: Stamp::new(7, Clock::Device),
+        scan_last_packet_host_ns: 8,
+        sent_host_ns: 9,
+        people: vec![],
+    };
+    let b = encode(&m).unwrap();
+    assert_eq!(decode(&b).unwrap(), m);
+    // The clock byte follows seq (4) and the stamp (8) in the payload.
+    let mut forged = b.clone();
+    forged[HEADER_LEN + 12] = 9;
+    let n = forged.len() - 4;
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&forged[..n]);
+    forged[n..].copy_from_slice(&crc.to_le_bytes());
+    let e = decode(&forged).unwrap_err().to_string();
+    assert!(e.contains("unknown stamp clock 9"), "{e}");
 }
 
 #[test]
@@ -78,7 +105,7 @@ fn detections_of_2000_points_stay_small() {
     let m = &every_kind()[5];
     let b = encode(m).unwrap();
     // 12 bytes per point plus fixed parts: no hidden blow-up.
-    assert_eq!(b.len(), HEADER_LEN + 32 + 3 * 64 + 2017 * 12 + 4);
+    assert_eq!(b.len(), HEADER_LEN + 33 + 3 * 64 + 2017 * 12 + 4);
 }
 
 #[test]
@@ -161,7 +188,7 @@ fn oversize_counts_are_refused_before_allocating() {
     assert!(decode(&vec![0u8; MAX_MESSAGE_BYTES + 1]).is_err());
     let too_many = LinkMessage::Detections {
         seq: 0,
-        stamp_ns: 0,
+        stamp: Stamp::new(0, Clock::Ptp),
         scan_last_packet_host_ns: 0,
         sent_host_ns: 0,
         people: vec![person(0, 0.0); MAX_PEOPLE + 1],
@@ -187,7 +214,7 @@ fn unknown_kind_version_role_and_bad_values_are_refused() {
     assert!(decode(&reframe(4, &p)).is_err());
     // NaN in a pose is refused on both sides.
     let nan_pose = LinkMessage::RobotPose {
-        stamp_ns: 0,
+        stamp: Stamp::new(0, Clock::Ptp),
         world_t_lidar: Isometry3::from_parts(Translation3::new(f64::NAN, 0.0, 0.0), UnitQuaternion::identity()),
     };
     assert!(encode(&nan_pose).is_err());

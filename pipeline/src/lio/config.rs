@@ -222,6 +222,7 @@ impl LioFile {
             map_min_spacing_m: self.map.min_spacing_m,
             map_radius_m: self.map.radius_m,
             health: self.health.clone(),
+            stopwatch: crate::timing::Stopwatch::Wall,
         })
     }
 }

@@ -2,25 +2,32 @@
 //! nearest neighbours come from the query's voxel and its 26 neighbours. Voxels far from the
 //! sensor are dropped, so the map stays local and its cost bounded.
 
-use crate::voxel_hash::{floor_i32, gap2, VoxelHashMap, NEIGHBOURS};
+use crate::voxel_hash::{gap2, key_of, Key, KeyMap, NEIGHBOURS};
 use nalgebra::Vector3;
-
-type Key = (i32, i32, i32);
 
 #[derive(Clone, Debug)]
 pub struct VoxelMap {
     resolution_m: f64,
+    inv_resolution: f64,
     per_voxel: usize,
     /// A new point closer than this to one already in its voxel adds nothing.
     min_spacing_m: f64,
     radius_m: f64,
-    voxels: VoxelHashMap<Key, Vec<Vector3<f64>>>,
+    voxels: KeyMap<Vec<Vector3<f64>>>,
     points: usize,
 }
 
 impl VoxelMap {
     pub fn new(resolution_m: f64, per_voxel: usize, min_spacing_m: f64, radius_m: f64) -> Self {
-        Self { resolution_m, per_voxel, min_spacing_m, radius_m, voxels: VoxelHashMap::default(), points: 0 }
+        Self {
+            resolution_m,
+            inv_resolution: 1.0 / resolution_m,
+            per_voxel,
+            min_spacing_m,
+            radius_m,
+            voxels: KeyMap::default(),
+            points: 0,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -32,8 +39,7 @@ impl VoxelMap {
     }
 
     fn key(&self, p: &Vector3<f64>) -> Key {
-        let f = |v: f64| floor_i32(v / self.resolution_m);
-        (f(p.x), f(p.y), f(p.z))
+        key_of(p, self.inv_resolution)
     }
 
     /// Adds a world point unless its voxel is full or already holds one close by.
@@ -70,8 +76,9 @@ impl VoxelMap {
         out.clear();
         let key = self.key(q);
         let max2 = max_dist_m * max_dist_m;
-        // The 27 voxels around the query: with the face neighbours only (iVox's NEARBY7) some
-        // scenes lost their nearest planes and drifted (the tactical robot: 1.4 cm -> 32 cm APE).
+        // The 27 voxels around the query: near a voxel's edges and corners the nearest points
+        // lie in edge and corner neighbours, which the face neighbours alone (iVox's NEARBY7)
+        // miss, and the scan loses its nearest planes (docs/lio.md, Map).
         for d in std::iter::once((0, 0, 0)).chain(NEIGHBOURS) {
             let bound = if out.len() < k { max2 } else { out.last().map_or(max2, |l| l.0) };
             if gap2([q.x, q.y, q.z], key, self.resolution_m, d) > bound {

@@ -8,11 +8,11 @@ use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::types::{ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
-use crate::voxel_hash::{floor_i32, VoxelHashMap};
+use crate::timing::Stopwatch;
+use crate::voxel_hash::voxel_downsample;
 use nalgebra::{Isometry3, Rotation3, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::time::Instant;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct LioConfig {
@@ -35,6 +35,8 @@ pub struct LioConfig {
     pub map_min_spacing_m: f64,
     pub map_radius_m: f64,
     pub health: HealthConfig,
+    /// The clock of `ScanOutput::elapsed_us`.
+    pub stopwatch: Stopwatch,
 }
 
 impl Default for LioConfig {
@@ -56,6 +58,7 @@ impl Default for LioConfig {
             map_min_spacing_m: 0.1,
             map_radius_m: 100.0,
             health: HealthConfig::default(),
+            stopwatch: Stopwatch::Wall,
         }
     }
 }
@@ -253,13 +256,13 @@ impl Lio {
     }
 
     fn process(&mut self, scan: &LioScan) -> ScanOutput {
-        let started = Instant::now();
+        let started = self.cfg.stopwatch.start();
         self.knots.clear();
         self.propagate_to(scan.end_ns);
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
         let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
         let mut used =
-            voxel_centroids(self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq), self.cfg.scan_voxel_m);
+            voxel_downsample(self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq), self.cfg.scan_voxel_m);
         thin_out(&mut used, self.cfg.max_points);
         let (mut report, mut verdict) = (UpdateReport::default(), None);
         if !self.map.is_empty() {
@@ -327,7 +330,7 @@ impl Lio {
             points_in: scan.points.len(),
             points_used: used.len(),
             map_points: self.map.len(),
-            elapsed_us: started.elapsed().as_micros() as u64,
+            elapsed_us: started.us(),
         }
     }
 
@@ -345,21 +348,6 @@ impl Lio {
     pub fn health_counts(&self) -> (u64, u64) {
         (self.monitor.scans_refused, self.monitor.times_lost)
     }
-}
-
-/// One centroid per occupied voxel, in voxel order (so runs repeat exactly).
-fn voxel_centroids<'a>(points: impl Iterator<Item = &'a Vector3<f64>>, voxel_m: f64) -> Vec<Vector3<f64>> {
-    let mut cells: VoxelHashMap<(i32, i32, i32), (Vector3<f64>, u32)> = VoxelHashMap::default();
-    cells.reserve(4096);
-    for p in points {
-        let k = (floor_i32(p.x / voxel_m), floor_i32(p.y / voxel_m), floor_i32(p.z / voxel_m));
-        let e = cells.entry(k).or_insert((Vector3::zeros(), 0));
-        e.0 += p;
-        e.1 += 1;
-    }
-    let mut cells: Vec<_> = cells.into_iter().collect();
-    cells.sort_unstable_by_key(|(k, _)| *k);
-    cells.into_iter().map(|(_, (s, n))| s / f64::from(n)).collect()
 }
 
 /// Keeps at most `max` points, evenly strided through the (voxel-ordered) list; 0 keeps all.
@@ -384,13 +372,5 @@ mod tests {
         assert_eq!(xs, [0.0, 2.0, 5.0, 7.0]);
         thin_out(&mut pts, 0);
         assert_eq!(pts.len(), 4);
-    }
-
-    #[test]
-    fn centroids_come_out_in_voxel_order() {
-        let pts = [Vector3::new(1.2, 0.0, 0.0), Vector3::new(-0.7, 0.0, 0.0), Vector3::new(1.4, 0.0, 0.0)];
-        let c = voxel_centroids(pts.iter(), 0.5);
-        assert_eq!(c.len(), 2);
-        assert!((c[0].x + 0.7).abs() < 1e-12 && (c[1].x - 1.3).abs() < 1e-12, "{c:?}");
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! Error-state order (each 3 wide): attitude (right perturbation, `R = R_hat * exp(d_theta)`),
 //! position, velocity, gyro bias, accelerometer bias, gravity. The LiDAR-IMU extrinsics are held
-//! here but not estimated yet; estimating them would append six error dimensions.
+//! here, fixed from the configuration: estimating them would append six error dimensions.
 
 use super::so3;
 use nalgebra::{Isometry3, Rotation3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
@@ -28,7 +28,7 @@ pub struct State {
     pub bias_gyro: Vector3<f64>,
     pub bias_acc: Vector3<f64>,
     pub gravity: Vector3<f64>,
-    /// The LiDAR in the IMU frame (`T_imu_lidar`), fixed for now.
+    /// The LiDAR in the IMU frame (`T_imu_lidar`), fixed (not part of the error state).
     pub rot_imu_lidar: Rotation3<f64>,
     pub pos_imu_lidar: Vector3<f64>,
 }

@@ -30,8 +30,8 @@ pub struct UpdateConfig {
     /// Eigen-directions of the normalised information below this take no update (see the
     /// module's notes); 0 applies every direction, as FAST-LIO2 does. Kept tiny: a weak
     /// direction still holds real information (an aisle's yaw: 0.0002 to 0.003 over ~900
-    /// matches), and with it dropped the rest of the update and the prior's correlations moved
-    /// the yaw freely (16.6 deg in 14 s at 0.005).
+    /// matches), and with it dropped the rest of the update and the prior's correlations move
+    /// the yaw freely (docs/lio.md, the auditorium's aisle).
     pub min_direction_info: f64,
     /// Neighbours are searched again after a step larger than these (else the planes are kept).
     pub research_rot_rad: f64,

@@ -4,20 +4,31 @@
 //! - [`RobotCore`]: the robot's LIO, person detection and the map it shares;
 //! - [`RigCore`]: the rig's LIO, its alignment to the robot's map and its world pose;
 //! - [`Overlay`]: the robot's detections as the rig holds and ages them;
-//! - [`render_view`]: the responder's frame at a time, from the three.
+//! - [`render_view`]: the responder's frame at a time, from the three;
+//! - [`RigSide`]: everything the rig does between its inputs and its frames (core, map, overlay,
+//!   render), which the rig node, the offline run and the rerun all drive;
+//! - [`OfflineMission`]: both sides in one process, in time order.
 
+mod input;
+mod offline;
 mod overlay;
 mod person_motion;
 mod place;
 mod rig;
+mod rig_side;
 mod robot;
 mod robot_map;
+mod sent_people;
 
+pub use input::{MissionInput, Side};
+pub use offline::{MissionEvent, OfflineMission};
 pub use overlay::Overlay;
 pub use place::ScanPlacer;
 pub use rig::{AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig};
+pub use rig_side::{RigSide, RigSideConfig, HOLD_NS};
 pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
 pub use robot_map::{RobotMap, RobotMapConfig};
+pub use sent_people::{people_to_draw, people_to_send};
 
 use crate::ar::{self, ArFrame, ArPerson, ArStatus, CameraModel, RenderConfig};
 use nalgebra::{Isometry3, Vector3};

@@ -76,6 +76,16 @@ impl Default for RigCoreConfig {
     }
 }
 
+impl RigCoreConfig {
+    /// These settings with every compute time measured on `stopwatch` (LIO and alignment).
+    pub fn with_stopwatch(mut self, stopwatch: crate::timing::Stopwatch) -> Self {
+        self.lio.stopwatch = stopwatch;
+        self.align.stopwatch = stopwatch;
+        self.track.stopwatch = stopwatch;
+        self
+    }
+}
+
 /// One registration of the rig's window against the robot's map, ready to run anywhere: it
 /// holds what it needs (shared scans, a copy of the odometry), so building the window, the
 /// costly part besides the registration, runs wherever the job does.

@@ -10,12 +10,12 @@ use crate::detect::{
     DetectConfig, DetectWindow, Detection, Detector, FloorModel, GeometricDetector, PersonPose, WindowPoint,
 };
 use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::timing::Stopwatch;
 use crate::PipelineError;
 use nalgebra::Vector3;
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::time::Instant;
 
 /// How the robot's side runs; the defaults are what `starc sim` measures.
 #[derive(Clone, Debug)]
@@ -45,6 +45,8 @@ pub struct RobotCoreConfig {
     pub walker_min_height_m: f64,
     pub motion_span_ns: u64,
     pub motion_min_baseline_ns: u64,
+    /// The clock of the detector's compute time.
+    pub stopwatch: Stopwatch,
 }
 
 /// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
@@ -60,6 +62,13 @@ impl RobotCoreConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             ..LioConfig::default()
         }
+    }
+
+    /// These settings with every compute time measured on `stopwatch` (LIO and detector).
+    pub fn with_stopwatch(mut self, stopwatch: Stopwatch) -> Self {
+        self.stopwatch = stopwatch;
+        self.lio.stopwatch = stopwatch;
+        self
     }
 
     /// The map's part of the config.
@@ -83,6 +92,7 @@ impl Default for RobotCoreConfig {
             walker_min_height_m: 0.8,
             motion_span_ns: 500_000_000,
             motion_min_baseline_ns: 200_000_000,
+            stopwatch: Stopwatch::Wall,
         }
     }
 }
@@ -185,11 +195,11 @@ impl RobotCore {
 
     fn detect(&mut self, o: &ScanOutput) -> RobotDetection {
         let points: Vec<WindowPoint> = self.window.iter().flat_map(|s| s.iter()).copied().collect();
-        let t0 = Instant::now();
+        let t0 = self.cfg.stopwatch.start();
         let w = DetectWindow { stamp: Stamp::new(o.end_ns, Clock::Ptp), sensor_pose: o.lidar_pose, points: &points };
         let mut found = Vec::new();
         self.detector.detect(&w, &mut found);
-        let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let detect_ms = t0.ms();
         let fresh_from = o.end_ns.saturating_sub(self.cfg.fresh_points_ns);
         let floor = self.detector.last_floor();
         let people = found

@@ -8,7 +8,7 @@ use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
 
-type VoxelKey = (i32, i32, i32);
+type VoxelKey = crate::voxel_hash::Key;
 
 /// Voxel and tile sizes of a [`RobotMap`].
 #[derive(Clone, Copy, Debug)]

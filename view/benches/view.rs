@@ -1,25 +1,21 @@
-//! What the live views cost (src/view): publishing a 640 x 480 AR frame into the hub (PNG
+//! What the live views cost (starc-view): publishing a 640 x 480 AR frame into the hub (PNG
 //! encode and copy, once per frame however many viewers), converting and writing it to a
 //! framebuffer (a file in /dev/shm standing in for the device), and the frame rate a browser
 //! stream delivers on loopback when the renderer publishes at 30 Hz and as fast as it can.
 //!
-//! Run with `cargo bench --bench view`. The frame is a rendered scene (`ar::render`: ~20k rig
+//! Run with `cargo bench -p starc-view --bench view`. The frame is a rendered scene (`ar::render`: ~20k rig
 //! points, 3 people behind a wall, boxes and the status line), the camera swaying from frame
 //! to frame so each PNG differs.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../src/view/mod.rs"]
-#[allow(dead_code, unused_imports)]
-mod view;
-
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use starc_pipeline::ar::{render, ArFrame, ArPerson, ArStatus, CameraModel, OrientedBox, RenderConfig};
+use starc_view::framebuffer::{FbGeometry, Framebuffer};
+use starc_view::{ViewHub, ViewStatus};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
-use view::framebuffer::{FbGeometry, Framebuffer};
-use view::{ViewHub, ViewStatus};
 
 struct Rng(u64);
 
@@ -169,7 +165,8 @@ fn main() {
     // 3. Browser stream on loopback.
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     let (stop, shutdown) = tokio::sync::watch::channel(false);
-    let (addr, _task) = rt.block_on(view::serve_http("127.0.0.1:0".parse().unwrap(), hub.clone(), shutdown)).unwrap();
+    let (addr, _task) =
+        rt.block_on(starc_view::serve_http("127.0.0.1:0".parse().unwrap(), hub.clone(), shutdown)).unwrap();
     for rate_hz in [Some(30.0), None] {
         let running = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
         let publisher = {

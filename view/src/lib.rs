@@ -1,5 +1,7 @@
-//! The responder's live views of the AR frame (docs/view.md): PNG files, a browser view served
-//! by the rig node, a Linux framebuffer for a small display, and a live Foxglove view.
+//! `starc-view`: the rig's live views of the responder's AR frame (docs/view.md): a browser page
+//! served over HTTP, a Foxglove WebSocket server, a Linux framebuffer for a small display, and a
+//! directory of PNG files. The network views bind to loopback by default ([`DEFAULT_HTTP_BIND`],
+//! [`DEFAULT_FOXGLOVE_BIND`]); serving them beyond this machine takes an explicit address.
 //!
 //! The renderer publishes each frame once into a [`ViewHub`]; every output follows the hub on
 //! its own task and skips frames it is too slow for, so no viewer can slow the renderer.

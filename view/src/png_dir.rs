@@ -10,7 +10,6 @@ use tokio::task::JoinHandle;
 pub struct PngDir {
     dir: PathBuf,
     every: u32,
-    written: u64,
 }
 
 impl PngDir {
@@ -20,12 +19,7 @@ impl PngDir {
             return Err(ViewError::Config("png_every must be at least 1".into()));
         }
         std::fs::create_dir_all(dir).map_err(|e| ViewError::io(format!("creating {}", dir.display()), e))?;
-        Ok(Self { dir: dir.to_path_buf(), every, written: 0 })
-    }
-
-    /// Files written so far.
-    pub fn written(&self) -> u64 {
-        self.written
+        Ok(Self { dir: dir.to_path_buf(), every })
     }
 
     /// Writes the snapshot's PNG if its turn has come; returns the file written. The file
@@ -38,7 +32,6 @@ impl PngDir {
         let tmp = self.dir.join(format!(".ar_{:08}.png.tmp", snapshot.status.frame_seq));
         std::fs::write(&tmp, snapshot.png()?).map_err(|e| ViewError::io(format!("writing {}", tmp.display()), e))?;
         std::fs::rename(&tmp, &path).map_err(|e| ViewError::io(format!("renaming to {}", path.display()), e))?;
-        self.written += 1;
         Ok(Some(path))
     }
 }

@@ -1,27 +1,24 @@
-//! The browser live view (src/view/http.rs) against real clients: curl for the page, the frame,
+//! The browser live view (view/src/http.rs) against real clients: curl for the page, the frame,
 //! the status and a 404; Python's http.client reading parts of the multipart stream
 //! (tests/peers/http_stream.py); raw sockets for malformed and oversized requests, the client
 //! limit, and a viewer that never reads.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../src/view/mod.rs"]
-#[allow(dead_code, unused_imports)]
-mod view;
-
 use serde_json::Value;
 use starc_pipeline::ar::ArFrame;
+use starc_view::{serve_http, ViewHub, ViewStatus};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use view::{serve_http, ViewHub, ViewStatus};
 
 const CURL: &str = "/usr/bin/curl";
 
+/// The workspace root, where .venv and tests/peers live.
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
 /// A frame whose every pixel says where it is and which frame it belongs to.
@@ -197,7 +194,7 @@ fn viewers_are_bounded_and_a_stalled_one_holds_up_nobody() {
     let server = start();
     server.hub.publish(&frame(32, 24, 0), status(0)).unwrap();
     let mut streams = Vec::new();
-    for _ in 0..view::http::MAX_CLIENTS {
+    for _ in 0..starc_view::http::MAX_CLIENTS {
         let mut s = TcpStream::connect(server.addr).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
         s.write_all(b"GET /stream HTTP/1.1\r\n\r\n").unwrap();

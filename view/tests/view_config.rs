@@ -4,17 +4,13 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../src/view/mod.rs"]
-#[allow(dead_code, unused_imports)]
-mod view;
-
 use starc_pipeline::ar::ArFrame;
+use starc_view::{start_views, ViewConfig, ViewHub, ViewStatus};
 use std::time::{Duration, Instant};
-use view::{start_views, ViewConfig, ViewHub, ViewStatus};
 
 #[test]
 fn the_shipped_example_loads_and_typos_are_refused() {
-    let shipped = ViewConfig::from_toml(include_str!("../config/view.toml")).unwrap();
+    let shipped = ViewConfig::from_toml(include_str!("../../config/view.toml")).unwrap();
     assert_eq!(shipped.http_bind, Some("127.0.0.1:8080".parse().unwrap()));
     assert_eq!(shipped.foxglove_bind, Some("127.0.0.1:8765".parse().unwrap()));
     assert_eq!(shipped.framebuffer, None);

@@ -1,4 +1,4 @@
-//! The live Foxglove view (src/view/foxglove.rs) against a real client: PyPI `websockets`
+//! The live Foxglove view (view/src/foxglove.rs) against a real client: PyPI `websockets`
 //! speaking `foxglove.websocket.v1` (tests/peers/foxglove_client.py), which decodes what it
 //! receives with `mcap_ros2`'s decoder built from the schema the server advertised and with
 //! `rosbags`' ROS 2 Humble types. Also: a client without the subprotocol is refused, and a
@@ -9,24 +9,21 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../src/view/mod.rs"]
-#[allow(dead_code, unused_imports)]
-mod view;
-
 use serde_json::Value;
 use starc_pipeline::cloud::{CloudPoint, PointCloud};
 use starc_pipeline::record::msgs::{Header, Marker, MarkerArray, Pose, Time, Vector3};
 use starc_pipeline::record::writer::cloud_to_msg;
 use starc_pipeline::record::{msgs::RosMessage, Topic};
+use starc_view::{ChannelSpec, FoxgloveServer};
 use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use view::{ChannelSpec, FoxgloveServer};
 
 const T0_NS: u64 = 1_763_719_200_000_000_000;
 
+/// The workspace root, where .venv and tests/peers live.
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
 /// The venv's python with the peers; a missing peer is a failure, not a skip.

@@ -1,18 +1,14 @@
-//! The framebuffer output (src/view/framebuffer.rs) against a regular file standing in for
+//! The framebuffer output (view/src/framebuffer.rs) against a regular file standing in for
 //! `/dev/fbN` and a fake sysfs directory: geometry read from sysfs, the frame scaled and centred,
 //! pixels checked in each layout (RGB565, RGB888, XRGB8888) at known places, clear errors for
 //! a missing device and an unsupported depth.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../src/view/mod.rs"]
-#[allow(dead_code, unused_imports)]
-mod view;
-
 use starc_pipeline::ar::ArFrame;
+use starc_view::framebuffer::{FbGeometry, Framebuffer, PixelFormat};
+use starc_view::{ViewError, ViewHub, ViewStatus};
 use std::path::Path;
-use view::framebuffer::{FbGeometry, Framebuffer, PixelFormat};
-use view::{ViewError, ViewHub, ViewStatus};
 
 /// Four quadrants: red, green / blue, white; 8x6.
 fn quadrants() -> ArFrame {
@@ -147,7 +143,7 @@ async fn the_follower_writes_published_frames() {
     let fb = Framebuffer::open_with_geometry(&device, g).unwrap();
     let hub = ViewHub::new();
     let (stop, shutdown) = tokio::sync::watch::channel(false);
-    let task = view::framebuffer::follow(fb, hub.subscribe(), shutdown);
+    let task = starc_view::framebuffer::follow(fb, hub.subscribe(), shutdown);
     hub.publish(&quadrants(), ViewStatus::default()).unwrap();
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
     while std::fs::metadata(&device).unwrap().len() < 24 * 6 {
