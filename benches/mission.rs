@@ -1,5 +1,6 @@
 //! `cargo bench --bench mission`: the see-through mission on every shipped scenario, live (mock
-//! devices, both nodes, the zenoh link on loopback) and offline (one process) on the same run,
+//! devices, both nodes, the zenoh link on loopback: the `starc sim` binary) and offline (in this
+//! process, through `starc_eval::offline`) on the same run,
 //! in one table: inlier ratio, detection, alignment, the rig's pose error, latency and memory.
 //!
 //! Lab and corridor run 30 s, auditorium and tactical 60 s (their robot needs that long to reach
@@ -10,6 +11,10 @@
 //! beyond one run. Latency figures depend on the machine's load: run it on a quiet machine.
 
 use serde_json::Value;
+use starc_eval::offline::{self, Offline, Start};
+use starc_eval::Truth;
+use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
+use starc_pipeline::mission::RobotCoreConfig;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -74,6 +79,26 @@ fn row(scenario: &str, r: &Value) -> String {
     )
 }
 
+/// The offline mission on a simulated run, through the library `starc mission` calls. Its
+/// memory figure is this process's peak so far (VmHWM), an upper bound on the run's own.
+fn offline(dir: &Path) -> Result<(), String> {
+    let truth = Truth::load(dir).map_err(|e| e.to_string())?;
+    let inputs =
+        starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP).map_err(|e| e.to_string())?;
+    let run = Offline {
+        out: dir.join("offline"),
+        frames_every: 0,
+        camera: truth.mount.camera.clone(),
+        lidar_t_camera: truth.mount.lidar_t_camera,
+        start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
+        start_gate_m: 2.0,
+        robot: RobotCoreConfig::default(),
+        truth: Some(truth),
+        wall_timing: true,
+    };
+    offline::run(inputs, run).map(drop).map_err(|e| e.to_string())
+}
+
 fn main() -> Result<(), String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let starc = PathBuf::from(env!("CARGO_BIN_EXE_starc"));
@@ -98,12 +123,8 @@ fn main() -> Result<(), String> {
             .args(["sim", s, "--duration", seconds, "--seed", &seed.to_string(), "--frames-every", "0", "--out"])
             .arg(&dir))?;
         rows.push(row(s, &report(&dir.join("mission/report.json"))?));
-        eprintln!("{s}: the mission offline on the same run");
-        run(Command::new(&starc)
-            .arg("mission")
-            .arg(&dir)
-            .args(["--frames-every", "0", "--out"])
-            .arg(dir.join("offline")))?;
+        eprintln!("{s}: the mission offline on the same run, in this process");
+        offline(&dir)?;
         rows.push(row(s, &report(&dir.join("offline/report.json"))?));
     }
     println!("seed {seed}");

@@ -1,7 +1,6 @@
 //! `starc`: the one command-line program of STARC.
 
 mod cmd;
-mod node;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

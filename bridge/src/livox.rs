@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 use starc_livox::data::DataPacket;
 use starc_livox::live::ImuReading;
 use starc_livox::scan::Scan;
+use starc_pipeline::cloud::{CloudPoint, PointCloud};
 use starc_pipeline::lio::{ImuSample, LioScan, TimedPoint};
 
 /// An assembled scan: every point stamped `start + offset` on the scan's clock.
@@ -24,6 +25,24 @@ pub fn lio_scan(scan: &Scan) -> LioScan {
             })
             .collect(),
     }
+}
+
+/// An assembled scan as a point cloud (reflectivity becomes intensity), for export and recording.
+pub fn scan_to_cloud(scan: &Scan) -> PointCloud {
+    let points = scan
+        .points
+        .iter()
+        .map(|p| CloudPoint {
+            x_m: p.x_m,
+            y_m: p.y_m,
+            z_m: p.z_m,
+            intensity: f32::from(p.reflectivity),
+            offset_ns: p.offset_ns,
+            line: p.line,
+            tag: p.tag,
+        })
+        .collect();
+    PointCloud::new(Some(scan.start), points)
 }
 
 /// The IMU sample a data packet carries, if it is an IMU packet (stamped on the LiDAR's clock).

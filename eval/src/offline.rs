@@ -6,13 +6,13 @@
 use crate::{quantiles, summary, LatencyReport, MemoryReport, Quantiles, Scorer, Truth};
 use crate::{EvalError, Result};
 use nalgebra::Isometry3;
-use starc_hil::sim::truth::tum_line;
+use starc_hil::tum::tum_line;
 use starc_pipeline::ar::{CameraModel, RenderConfig};
 use starc_pipeline::mission::{
     AlignVerdict, MissionEvent, MissionInput, OfflineMission, RigCoreConfig, RigSide, RigSideConfig, RobotCore,
     RobotCoreConfig, HOLD_NS,
 };
-use starc_pipeline::timing::Stopwatch;
+use starc_pipeline::timing::{peak_rss_mib, Stopwatch};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -58,14 +58,6 @@ pub struct ReplayReport {
     pub frames: usize,
     pub peak_rss_mib: Option<f64>,
     pub wall_s: f64,
-}
-
-/// The process's peak resident memory (VmHWM), in MiB; `None` off Linux.
-pub fn peak_rss_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
 }
 
 /// Runs the mission over `inputs` and writes its outputs into `run.out`; what it printed is

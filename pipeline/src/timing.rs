@@ -1,4 +1,4 @@
-//! Compute time, measured on a clock the caller chooses. The cores report how long their steps
+//! Compute time, measured on a clock the caller chooses, and peak memory. The cores report how long their steps
 //! took (for latency figures); no result depends on it. A rerun that must give the same bytes
 //! twice turns the clock off and every measured time reads 0.
 
@@ -44,6 +44,14 @@ impl Lap {
     pub fn us(&self) -> u64 {
         self.0.map_or(0, |t| u64::try_from(t.elapsed().as_micros()).unwrap_or(u64::MAX))
     }
+}
+
+/// The process's peak resident memory (VmHWM), in MiB; `None` where /proc is not Linux's.
+pub fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 #[cfg(test)]

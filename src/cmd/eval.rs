@@ -12,6 +12,7 @@ use starc_eval::batch::{flatten, markdown_table, print_summary, summarize, write
 use starc_eval::offline::{self, Offline, Start};
 use starc_hil::gen;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
+use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_pipeline::mission::RobotCoreConfig;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -232,8 +233,7 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
 
 fn mission_offline(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
     let truth = starc_eval::Truth::load(dir)?;
-    let inputs =
-        starc_bridge::from_capture(&dir.join("avia.pcap"), super::mission::ROBOT_AVIA, super::mission::FPV_AVIA)?;
+    let inputs = starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
     let (start, start_gate_m) = match args.hint {
         Hint::None => (Start::At(Isometry3::identity()), f64::INFINITY),
         Hint::Truth => (Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 }, 2.0),

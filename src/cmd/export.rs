@@ -10,7 +10,7 @@ use anyhow::Context;
 use starc_livox::capture::{self, Datagram};
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{Scan, ScanAssembler, ScanConfig, TagFilter};
-use starc_pipeline::cloud::{self, CloudFormat, CloudPoint, PointCloud};
+use starc_pipeline::cloud::{self, CloudFormat};
 use starc_time::Clock;
 use std::collections::BTreeMap;
 use std::fmt;
@@ -143,24 +143,6 @@ impl fmt::Display for DeviceSelector {
     }
 }
 
-/// Converts an assembled scan into a point cloud (reflectivity becomes intensity).
-pub fn scan_to_cloud(scan: &Scan) -> PointCloud {
-    let points = scan
-        .points
-        .iter()
-        .map(|p| CloudPoint {
-            x_m: p.x_m,
-            y_m: p.y_m,
-            z_m: p.z_m,
-            intensity: f32::from(p.reflectivity),
-            offset_ns: p.offset_ns,
-            line: p.line,
-            tag: p.tag,
-        })
-        .collect();
-    PointCloud::new(Some(scan.start), points)
-}
-
 /// What happened to one device's packets.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct DeviceStats {
@@ -215,7 +197,7 @@ impl Device {
             if self.stats.scans == 0 {
                 std::fs::create_dir_all(&self.dir).with_context(|| format!("creating {}", self.dir.display()))?;
             }
-            cloud::write(&path, &scan_to_cloud(&scan), format)?;
+            cloud::write(&path, &starc_bridge::livox::scan_to_cloud(&scan), format)?;
             self.stats.scans += 1;
             self.stats.points += scan.points.len() as u64;
             self.stats.returns += scan.returns;

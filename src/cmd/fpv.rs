@@ -1,9 +1,9 @@
-//! `starc fpv --config fpv.toml`: the responder's rig node (see `node::fpv`); stops on SIGINT
+//! `starc fpv --config fpv.toml`: the responder's rig node (see `starc_node::fpv`); stops on SIGINT
 //! or SIGTERM, finishing its recording.
 
 use super::runtime;
-use crate::node::config::{load, FpvNodeConfig};
-use crate::node::{fpv, stop_on_signals};
+use starc_node::config::{load, FpvNodeConfig};
+use starc_node::{fpv, stop_on_signals};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

@@ -20,8 +20,7 @@ use starc_bridge::external_imu::read_external_imu;
 use starc_bridge::is_mcap;
 use starc_bridge::livox::{lio_scan, packet_imu};
 use starc_bridge::recorded::{recorded, Recorded};
-use starc_eval::offline::peak_rss_mib;
-use starc_hil::sim::truth::tum_line;
+use starc_hil::tum::tum_line;
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{Scan, ScanAssembler, ScanConfig, TagFilter};
@@ -29,6 +28,7 @@ use starc_pipeline::cloud::{self, CloudFormat, CloudPoint, PointCloud};
 use starc_pipeline::lio::{
     Health, ImuSample, ImuSource, InitStatus, Lio, LioConfig, LioFile, LioScan, LioStatus, ScanOutput,
 };
+use starc_pipeline::timing::peak_rss_mib;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};

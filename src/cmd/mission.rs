@@ -17,12 +17,9 @@
 
 use starc_eval::offline::{self, Offline, Start};
 use starc_eval::Truth;
+use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
 use starc_pipeline::mission::RobotCoreConfig;
-use std::net::Ipv4Addr;
 use std::path::PathBuf;
-
-pub const ROBOT_AVIA: Ipv4Addr = Ipv4Addr::new(192, 168, 1, 101);
-pub const FPV_AVIA: Ipv4Addr = Ipv4Addr::new(192, 168, 2, 102);
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -52,7 +49,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let truth = Truth::load(&args.dir)?;
-    let inputs = starc_bridge::from_capture(&args.dir.join("avia.pcap"), ROBOT_AVIA, FPV_AVIA)?;
+    let inputs = starc_bridge::from_capture(&args.dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
     let run = Offline {
         out: args.out.clone().unwrap_or_else(|| args.dir.join("mission")),
         frames_every: args.frames_every,

@@ -4,9 +4,9 @@
 //! into report.json when the simulator's truth is given. `--no-wall-timing` reads every compute
 //! time as 0, so two reruns write the same bytes.
 
-use crate::node::config::{load, CameraMountConfig, FpvNodeConfig};
 use anyhow::bail;
 use starc_eval::offline::{self, Offline, Start};
+use starc_node::config::{load, CameraMountConfig, FpvNodeConfig};
 use starc_pipeline::mission::RobotCoreConfig;
 use std::path::PathBuf;
 

@@ -1,9 +1,9 @@
-//! `starc robot --config robot.toml`: the robot node (see `node::robot`); stops on SIGINT or
+//! `starc robot --config robot.toml`: the robot node (see `starc_node::robot`); stops on SIGINT or
 //! SIGTERM, finishing its recording.
 
 use super::runtime;
-use crate::node::config::{load, RobotNodeConfig};
-use crate::node::{robot, stop_on_signals};
+use starc_node::config::{load, RobotNodeConfig};
+use starc_node::{robot, stop_on_signals};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

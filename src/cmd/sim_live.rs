@@ -4,19 +4,19 @@
 //! driver, the link between them over zenoh on tcp/127.0.0.1, and everything the nodes do scored
 //! against the simulator's truth into report.json (mode "live").
 
-use super::mission::{FPV_AVIA, ROBOT_AVIA};
-use crate::node::config::{CameraMountConfig, FpvNodeConfig, RobotNodeConfig, StartPose};
-use crate::node::fpv::{self, FpvEvent};
-use crate::node::robot::{self, RobotEvent};
 use anyhow::{bail, Context};
 use nalgebra::{Isometry3, UnitQuaternion};
-use starc_eval::offline::peak_rss_mib;
 use starc_eval::{summary, LatencyReport, MemoryReport, Scorer, Truth};
 use starc_hil::avia::{CaptureSource, MockAvia, MockAviaConfig};
-use starc_hil::sim::truth::tum_line;
+use starc_hil::sim::run::{FPV_AVIA_IP as FPV_AVIA, ROBOT_AVIA_IP as ROBOT_AVIA};
+use starc_hil::tum::tum_line;
 use starc_link::LinkConfig;
 use starc_livox::live::DriverConfig;
+use starc_node::config::{CameraMountConfig, FpvNodeConfig, RobotNodeConfig, StartPose};
+use starc_node::fpv::{self, FpvEvent};
+use starc_node::robot::{self, RobotEvent};
 use starc_pipeline::mission::AlignVerdict;
+use starc_pipeline::timing::peak_rss_mib;
 use std::io::Write as _;
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
@@ -98,10 +98,10 @@ fn link(listen: Option<u16>, connect: Option<u16>) -> anyhow::Result<LinkConfig>
 }
 
 /// Runs the nodes on their own thread and runtime.
-fn spawn_node<F, Fut, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<T>>>
+fn spawn_node<F, Fut, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<starc_node::Result<T>>>
 where
     F: FnOnce() -> Fut + Send + 'static,
-    Fut: std::future::Future<Output = anyhow::Result<T>>,
+    Fut: std::future::Future<Output = starc_node::Result<T>>,
     T: Send + 'static,
 {
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
@@ -160,7 +160,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     // They stand in for devices that cost a real host no CPU: below the nodes when the cores are busy.
     let mocks_rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
-        .on_thread_start(|| crate::node::lower_this_thread(HARNESS_NICE))
+        .on_thread_start(|| starc_node::lower_this_thread(HARNESS_NICE))
         .enable_all()
         .build()?;
     let w0 = Instant::now() + Duration::from_nanos(super::mock::PLAYBACK_LEAD_NS);
@@ -186,7 +186,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
     let robot = spawn_node("robot-node", move || robot::run(robot_cfg, robot_stop, Some(robot_tx)))?;
     let fpv = spawn_node("fpv-node", move || fpv::run(fpv_cfg, fpv_stop, schedule, Some(fpv_tx)))?;
     // The scoring below is the harness too (the nodes' threads, started above, keep their priority).
-    crate::node::lower_this_thread(HARNESS_NICE);
+    starc_node::lower_this_thread(HARNESS_NICE);
 
     let deadline = w0 + Duration::from_nanos(end_ns.saturating_sub(s0)) + TAIL;
     let total_s = deadline.saturating_duration_since(Instant::now()).as_secs_f64();

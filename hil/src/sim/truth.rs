@@ -3,7 +3,6 @@
 
 use crate::error::{HilError, Result};
 use crate::sim::lidar::PacketLabels;
-pub use crate::tum::tum_line;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};

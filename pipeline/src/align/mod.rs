@@ -22,7 +22,6 @@ mod ndt;
 mod register;
 mod tiles;
 
-pub(crate) use crate::voxel_hash::key_of;
 pub use carve::seen_through;
 pub use config::AlignConfig;
 pub use free_space::{FreeSpace, Ray};

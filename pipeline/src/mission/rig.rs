@@ -131,9 +131,9 @@ impl AlignJob {
     }
 
     pub fn run(self) -> Result<AlignOutcome, PipelineError> {
-        // The window in a gravity-aligned frame at the rig; both sides reduced alike. (Preparing
-        // both with `prepare_map`, floor and ceiling thinned, placed the auditorium's rig 68 cm
-        // off and accepted it; reduced alike, it refuses.)
+        // The window in a gravity-aligned frame at the rig; both sides reduced alike, so that a
+        // surface weighs the same in the window as in the map (thinning one side's floor and
+        // ceiling alone biases the fit along them: see docs/align.md).
         let (placed, rays, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
         let inv = frame.inverse();
         let (source, kept) = filter_window(&placed, &rays, &inv, &self.people, &self.window);
@@ -528,8 +528,8 @@ mod tests {
         // Half a metre along the walk: its start is half a metre off too.
         let near = pose_xyz_yaw(2.0, 13.5, 1.5, 180.0);
         assert!((start_offset_m(&near, &now, &first, &hint) - 0.5).abs() < 1e-9);
-        // On the hint itself (what the old gate, on the current pose, wanted) but turned the
-        // other way: the start it implies lies the walk's 10 m away.
+        // On the hint itself (a gate on the current pose would pass it) but turned the other
+        // way: the start it implies lies the walk's 10 m away.
         let flipped = pose_xyz_yaw(2.0, 3.0, 1.5, 0.0);
         assert!((start_offset_m(&flipped, &now, &first, &hint) - 10.0).abs() < 1e-9);
     }

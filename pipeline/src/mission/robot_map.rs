@@ -2,8 +2,9 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::{encode_tiles, key_of};
+use crate::align::encode_tiles;
 use crate::detect::WindowPoint;
+use crate::voxel_hash::key_of;
 use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;

@@ -1,9 +1,13 @@
-//! The live nodes: `starc robot` on the robot, `starc fpv` on the responder's rig, talking over
-//! the link (starc-link, zenoh). Each wires a live driver to its side of the mission
-//! (`starc_pipeline::mission`) and its outputs; `starc sim` runs both against mock devices.
+//! The live nodes: [`robot`] on the robot (`starc robot`), [`fpv`] on the responder's rig
+//! (`starc fpv`), talking over the link (starc-link, zenoh). Each wires a live driver to its
+//! side of the mission (`starc_pipeline::mission`, sans-IO) and to its outputs (the link, the
+//! views, the recording): sockets, tasks and channels only. `starc sim` runs both against mock
+//! devices.
 
 mod background;
+pub mod error;
 pub use background::lower_this_thread;
+pub use error::{NodeError, Result};
 pub mod config;
 pub mod fpv;
 pub mod recording;
@@ -82,9 +86,10 @@ pub async fn wait_stop(stop: &mut Stop) {
 }
 
 /// A stop signal that fires on SIGINT or SIGTERM, so recordings are finalized.
-pub fn stop_on_signals() -> anyhow::Result<(watch::Sender<bool>, Stop)> {
+pub fn stop_on_signals() -> Result<(watch::Sender<bool>, Stop)> {
     let (tx, rx) = watch::channel(false);
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .map_err(|source| NodeError::Io { what: "waiting for SIGTERM", source })?;
     let signal_tx = tx.clone();
     tokio::spawn(async move {
         tokio::select! {

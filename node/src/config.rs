@@ -1,7 +1,7 @@
 //! `robot.toml` and `fpv.toml`: what each node runs (examples in config/, every key documented
 //! there).
 
-use anyhow::Context;
+use crate::error::{NodeError, Result};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Deserialize;
 use starc_link::LinkConfig;
@@ -69,12 +69,12 @@ pub struct CameraMountConfig {
 }
 
 impl CameraMountConfig {
-    pub fn lidar_t_camera(&self) -> anyhow::Result<Isometry3<f64>> {
+    pub fn lidar_t_camera(&self) -> Result<Isometry3<f64>> {
         let [x, y, z, w] = self.quaternion_xyzw;
         let q = nalgebra::Quaternion::new(w, x, y, z);
         let n = q.norm();
         if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
-            anyhow::bail!("camera.quaternion_xyzw must be a unit quaternion (norm {n})");
+            return Err(NodeError::Config(format!("camera.quaternion_xyzw must be a unit quaternion (norm {n})")));
         }
         let [tx, ty, tz] = self.translation_m;
         Ok(Isometry3::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(q)))
@@ -130,25 +130,25 @@ fn default_record_frames_every() -> u64 {
     5
 }
 
-fn read(path: &Path) -> anyhow::Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))
+fn read(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| NodeError::Read { path: path.into(), source })
 }
 
 /// A node config file; relative paths inside it are taken from the file's directory.
-pub fn load<T: for<'de> Deserialize<'de>>(path: &Path) -> anyhow::Result<T> {
+pub fn load<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
     let text = read(path)?;
-    toml::from_str(&text).with_context(|| format!("{}", path.display()))
+    toml::from_str(&text).map_err(|source| NodeError::Toml { path: path.into(), source })
 }
 
-pub fn lio_config(path: Option<&Path>) -> anyhow::Result<LioConfig> {
+pub fn lio_config(path: Option<&Path>) -> Result<LioConfig> {
     let Some(path) = path else { return Ok(LioConfig::default()) };
-    let file = LioFile::from_toml(&read(path)?).with_context(|| format!("{}", path.display()))?;
-    Ok(file.to_config()?)
+    let bad = |source| NodeError::File { path: path.into(), source };
+    LioFile::from_toml(&read(path)?).and_then(|f| f.to_config()).map_err(bad)
 }
 
-pub fn render_config(path: Option<&Path>) -> anyhow::Result<RenderConfig> {
+pub fn render_config(path: Option<&Path>) -> Result<RenderConfig> {
     let Some(path) = path else { return Ok(RenderConfig::default()) };
-    RenderConfig::from_toml(&read(path)?).with_context(|| format!("{}", path.display()))
+    RenderConfig::from_toml(&read(path)?).map_err(|source| NodeError::File { path: path.into(), source })
 }
 
 /// A path in a config file, taken from the file's directory when relative.
@@ -172,9 +172,12 @@ impl RobotNodeConfig {
 impl FpvNodeConfig {
     /// What the types let through but the node cannot use: a start gate that is not a positive
     /// distance or `inf` (no gate).
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<()> {
         if self.start_gate_m.is_nan() || self.start_gate_m <= 0.0 {
-            anyhow::bail!("start_gate_m must be a positive distance, or inf for no gate (got {})", self.start_gate_m);
+            return Err(NodeError::Config(format!(
+                "start_gate_m must be a positive distance, or inf for no gate (got {})",
+                self.start_gate_m
+            )));
         }
         Ok(())
     }

@@ -8,7 +8,7 @@
 use super::config::{lio_config, render_config, FpvNodeConfig};
 use super::recording::NodeRecorder;
 use super::{wait_stop, Fed, LidarFeed, Stop};
-use anyhow::Context;
+use crate::error::{NodeError, Result};
 use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Received, Role};
 use starc_livox::live::{LivoxDriver, LivoxEvent};
@@ -78,7 +78,7 @@ struct Waiting {
     recv_host_ns: u64,
 }
 
-type Job = tokio::sync::oneshot::Receiver<Result<AlignOutcome, PipelineError>>;
+type Job = tokio::sync::oneshot::Receiver<std::result::Result<AlignOutcome, PipelineError>>;
 
 /// Runs until `stop`. `schedule` lists (index, rig LiDAR time) of extra frames to render and
 /// report through `watch` (the simulator's camera frames); live frames need none.
@@ -87,7 +87,7 @@ pub async fn run(
     mut stop: Stop,
     schedule: Vec<(u64, u64)>,
     watch: Option<mpsc::UnboundedSender<FpvEvent>>,
-) -> anyhow::Result<FpvSummary> {
+) -> Result<FpvSummary> {
     cfg.validate()?;
     let mut side = RigSide::new(side_config(&cfg)?)?;
     side.core_mut().set_start_hint(cfg.expected_start.map_or_else(Isometry3::identity, |s| s.isometry()));
@@ -97,9 +97,9 @@ pub async fn run(
     let recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "fpv")).transpose()?;
     let hub = ViewHub::new();
     let (views_stop, views_shutdown) = tokio::sync::watch::channel(false);
-    let views = start_views(&cfg.view, hub.clone(), views_shutdown).await.context("starting the views")?;
-    let mut link = LinkNode::open(&cfg.link, Role::Rig).await.context("opening the link")?;
-    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
+    let views = start_views(&cfg.view, hub.clone(), views_shutdown).await?;
+    let mut link = LinkNode::open(&cfg.link, Role::Rig).await?;
+    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await?;
     tracing::info!(host = ?driver.host, "rig node up");
 
     let mut node = RigNode {
@@ -161,14 +161,14 @@ pub async fn run(
     let _ = driver.stop().await;
     node.summary.map_tiles = node.side.tile_count();
     link.close().await?;
-    node.summary.peak_rss_mib = starc_eval::offline::peak_rss_mib();
+    node.summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(summary = ?node.summary, "rig node down");
     Ok(node.summary)
 }
 
-fn side_config(cfg: &FpvNodeConfig) -> anyhow::Result<RigSideConfig> {
+fn side_config(cfg: &FpvNodeConfig) -> Result<RigSideConfig> {
     let camera = cfg.camera.model.clone();
-    camera.validate().map_err(|e| anyhow::anyhow!("[camera]: {e}"))?;
+    camera.validate().map_err(|e| NodeError::Config(format!("[camera]: {e}")))?;
     Ok(RigSideConfig {
         core: RigCoreConfig {
             lio: lio_config(cfg.lio.as_deref())?,
@@ -210,7 +210,7 @@ impl RigNode {
         }
     }
 
-    fn aligned(&mut self, outcome: Result<AlignOutcome, PipelineError>) {
+    fn aligned(&mut self, outcome: std::result::Result<AlignOutcome, PipelineError>) {
         let report = outcome.as_ref().ok().map(|o| (o.end_ns, o.world_t_lidar, o.report.total_ms));
         let verdict = self.side.apply(outcome);
         self.summary.alignments += 1;

@@ -8,6 +8,7 @@
 //! the node; chunks close every second, so a crash leaves a readable file, and `finish` (on
 //! SIGINT/SIGTERM or the end of a run) writes the index. Dropping the recorder finishes it too.
 
+use crate::error::{NodeError, Result};
 use nalgebra::Isometry3;
 use starc_livox::scan::Scan;
 use starc_pipeline::lio::ImuSample;
@@ -51,15 +52,16 @@ fn pose_msg(p: &Isometry3<f64>) -> Pose {
 impl NodeRecorder {
     /// `device` names the topics (`robot`, `fpv`) and the LiDAR's frame. The file is created
     /// here, so a bad path fails the node at start.
-    pub fn create(path: &Path, device: &'static str) -> anyhow::Result<Self> {
+    pub fn create(path: &Path, device: &'static str) -> Result<Self> {
         let lidar = if device == "robot" { "avia".to_string() } else { format!("{device}_avia") };
         let frames = Frames { lidar, ..Frames::default() };
         let options = RecorderOptions { clock: Clock::Ptp, frames, ..RecorderOptions::default() };
-        let rec = Recorder::create(path, options)?;
+        let rec = Recorder::create(path, options).map_err(|source| NodeError::File { path: path.into(), source })?;
         tracing::info!(path = %path.display(), "recording");
         let (tx, rx) = sync_channel(QUEUE_ENTRIES);
         let writer =
-            std::thread::Builder::new().name(format!("{device}-recorder")).spawn(move || write_all(rec, device, rx))?;
+            std::thread::Builder::new().name(format!("{device}-recorder")).spawn(move || write_all(rec, device, rx));
+        let writer = writer.map_err(|source| NodeError::Io { what: "starting the recorder thread", source })?;
         Ok(Self { tx: Some(tx), writer: Some(writer), waited: false })
     }
 
@@ -122,18 +124,18 @@ impl NodeRecorder {
 
     /// Waits for the writer to write everything queued and the index; an error if the index
     /// could not be written (a disk error earlier only stopped the recording, with a warning).
-    pub fn finish(mut self) -> anyhow::Result<()> {
+    pub fn finish(mut self) -> Result<()> {
         self.close()
     }
 
-    fn close(&mut self) -> anyhow::Result<()> {
+    fn close(&mut self) -> Result<()> {
         self.tx = None;
         let Some(writer) = self.writer.take() else { return Ok(()) };
         match writer.join() {
             Ok(Ok(Some(stats))) => tracing::info!(?stats, "recording finished"),
             Ok(Ok(None)) => {}
-            Ok(Err(e)) => anyhow::bail!("finishing the recording: {e}"),
-            Err(_) => anyhow::bail!("the recording's writer thread panicked"),
+            Ok(Err(e)) => return Err(NodeError::Pipeline(e)),
+            Err(_) => return Err(NodeError::Thread("the recording's writer thread panicked")),
         }
         Ok(())
     }
@@ -151,7 +153,7 @@ impl Drop for NodeRecorder {
 /// What the writer thread ends with: the stats of a recording it finished, `None` for one a
 /// write error had already stopped (and finished as far as it could), or the error of the last
 /// finish.
-type Finished = Result<Option<RecorderStats>, starc_pipeline::PipelineError>;
+type Finished = std::result::Result<Option<RecorderStats>, starc_pipeline::PipelineError>;
 
 /// The writer thread: every entry until the node hangs up, then the index.
 fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Finished {
@@ -159,7 +161,7 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Fi
     for entry in rx {
         let (what, result) = match entry {
             Entry::Scan(scan) => {
-                ("points", rec.point_cloud_on(&points_topic, &crate::cmd::export::scan_to_cloud(&scan)))
+                ("points", rec.point_cloud_on(&points_topic, &starc_bridge::livox::scan_to_cloud(&scan)))
             }
             Entry::Imu(s) => {
                 let (g, a) = (s.gyro_rad_s, s.acc_m_s2);

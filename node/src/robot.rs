@@ -5,7 +5,7 @@
 use super::config::{lio_config, RobotNodeConfig};
 use super::recording::NodeRecorder;
 use super::{wait_stop, Fed, LidarFeed, Stop};
-use anyhow::Context;
+use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::LivoxDriver;
 use starc_pipeline::detect::WindowPoint;
@@ -37,7 +37,7 @@ pub async fn run(
     cfg: RobotNodeConfig,
     mut stop: Stop,
     watch: Option<mpsc::UnboundedSender<RobotEvent>>,
-) -> anyhow::Result<RobotSummary> {
+) -> Result<RobotSummary> {
     let lio = match cfg.lio.as_deref() {
         Some(path) => lio_config(Some(path))?,
         None => RobotCoreConfig::robot_lio(),
@@ -48,8 +48,8 @@ pub async fn run(
     let period = Duration::from_millis(cfg.map_period_ms.max(10));
     let (map_tx, mut tiles_rx, map_thread) = spawn_map(map, period)?;
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "robot")).transpose()?;
-    let link = LinkNode::open(&cfg.link, Role::Robot).await.context("opening the link")?;
-    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await.context("starting the Livox driver")?;
+    let link = LinkNode::open(&cfg.link, Role::Robot).await?;
+    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await?;
     tracing::info!(host = ?driver.host, "robot node up");
     let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
     // Each recent scan's end, its LiDAR's clock, and when its last packet arrived (host clock).
@@ -136,13 +136,13 @@ pub async fn run(
             summary.tiles_sent += 1;
         }
     }
-    map_thread.join().map_err(|_| anyhow::anyhow!("the map thread panicked"))??;
+    map_thread.join().map_err(|_| NodeError::Thread("the map thread panicked"))??;
     if let Some(r) = recorder.take() {
         r.finish()?;
     }
     let _ = driver.stop().await;
     link.close().await?;
-    summary.peak_rss_mib = starc_eval::offline::peak_rss_mib();
+    summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(?summary, "robot node down");
     Ok(summary)
 }
@@ -153,35 +153,38 @@ fn scan_of(scans: &VecDeque<(u64, Clock, u64)>, end_ns: u64) -> (Clock, u64) {
     scans.iter().find(|(end, ..)| *end == end_ns).map_or_else(|| (Clock::Ptp, host_now_ns()), |(_, c, h)| (*c, *h))
 }
 
-type MapThread = std::thread::JoinHandle<anyhow::Result<()>>;
+type MapThread = std::thread::JoinHandle<Result<()>>;
 type PlacedScans = std::sync::mpsc::Sender<Arc<Vec<WindowPoint>>>;
 type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
 
 /// The map grown on its own thread from the placed scans the node hands it: growing it and
 /// encoding tiles (several milliseconds a second) never hold up a scan or a detection. Every
 /// `period` it sends the changed tiles, and the last ones once the node hangs up.
-fn spawn_map(mut map: RobotMap, period: Duration) -> anyhow::Result<(PlacedScans, EncodedTiles, MapThread)> {
+fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, EncodedTiles, MapThread)> {
     let (scans_tx, scans_rx) = std::sync::mpsc::channel::<Arc<Vec<WindowPoint>>>();
     let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
-    let thread = std::thread::Builder::new().name("robot-map".into()).spawn(move || {
-        let mut next = Instant::now() + period;
-        loop {
-            match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
-                Ok(placed) => map.add(&placed),
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-            if Instant::now() >= next {
-                next = (next + period).max(Instant::now());
-                // Everything the node has handed over by now goes into these tiles.
-                while let Ok(placed) = scans_rx.try_recv() {
-                    map.add(&placed);
+    let thread = std::thread::Builder::new()
+        .name("robot-map".into())
+        .spawn(move || {
+            let mut next = Instant::now() + period;
+            loop {
+                match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
+                    Ok(placed) => map.add(&placed),
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
                 }
-                let _ = tiles_tx.send(map.take_changed_tiles()?);
+                if Instant::now() >= next {
+                    next = (next + period).max(Instant::now());
+                    // Everything the node has handed over by now goes into these tiles.
+                    while let Ok(placed) = scans_rx.try_recv() {
+                        map.add(&placed);
+                    }
+                    let _ = tiles_tx.send(map.take_changed_tiles()?);
+                }
             }
-        }
-        let _ = tiles_tx.send(map.take_changed_tiles()?);
-        Ok(())
-    })?;
+            let _ = tiles_tx.send(map.take_changed_tiles()?);
+            Ok(())
+        })
+        .map_err(|source| NodeError::Io { what: "starting the map thread", source })?;
     Ok((scans_tx, tiles_rx, thread))
 }

@@ -1,0 +1,30 @@
+//! Everything that stops a node from starting or finishing cleanly.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("reading {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {source}")]
+    Toml { path: PathBuf, source: toml::de::Error },
+    /// A setting the types let through but the node cannot use.
+    #[error("{0}")]
+    Config(String),
+    #[error("{path}: {source}")]
+    File { path: PathBuf, source: starc_pipeline::PipelineError },
+    #[error("{0}")]
+    Pipeline(#[from] starc_pipeline::PipelineError),
+    #[error("the link: {0}")]
+    Link(#[from] starc_link::LinkError),
+    #[error("the Livox driver: {0}")]
+    Livox(#[from] starc_livox::LivoxError),
+    #[error("the views: {0}")]
+    View(#[from] starc_view::ViewError),
+    #[error("{what}: {source}")]
+    Io { what: &'static str, source: std::io::Error },
+    #[error("{0}")]
+    Thread(&'static str),
+}
+
+pub type Result<T> = std::result::Result<T, NodeError>;
