@@ -23,15 +23,21 @@ const MIP_SYNC: [u8; 2] = [0x75, 0x65];
 /// Otherwise it is read as the simulator's CSV: `time_s,gyro_x_rad_s,..,accel_z_m_s2`.
 pub fn read_external_imu(path: &Path, offset_ns: i64) -> Result<Vec<ImuSample>, BridgeError> {
     let bytes = std::fs::read(path).map_err(|source| BridgeError::Io { path: path.into(), source })?;
-    let bad = |reason: String| BridgeError::ExternalImu { path: path.into(), reason };
-    let mut samples = if bytes.starts_with(&MIP_SYNC) { mip(&bytes) } else { csv(&bytes).map_err(bad)? };
-    if samples.is_empty() {
-        return Err(bad("no IMU samples".into()));
-    }
+    let mut samples = parse(&bytes).map_err(|reason| BridgeError::ExternalImu { path: path.into(), reason })?;
     for s in &mut samples {
         s.t_ns = s.t_ns.saturating_add_signed(offset_ns);
     }
     samples.sort_by_key(|s| s.t_ns);
+    Ok(samples)
+}
+
+/// An external IMU file's samples in file order: a MIP stream or the CSV (see
+/// [`read_external_imu`]); the reason when it holds none.
+pub fn parse(bytes: &[u8]) -> Result<Vec<ImuSample>, String> {
+    let samples = if bytes.starts_with(&MIP_SYNC) { mip(bytes) } else { csv(bytes)? };
+    if samples.is_empty() {
+        return Err("no IMU samples".into());
+    }
     Ok(samples)
 }
 
@@ -48,11 +54,17 @@ fn mip(bytes: &[u8]) -> Vec<ImuSample> {
             untimed += 1;
             continue;
         };
-        out.push(ImuSample { t_ns, gyro_rad_s: Vector3::from(s.gyro_rad_s), acc_m_s2: Vector3::from(s.accel_m_s2) });
+        let sample = ImuSample { t_ns, gyro_rad_s: Vector3::from(s.gyro_rad_s), acc_m_s2: Vector3::from(s.accel_m_s2) };
+        // A NaN or infinity would poison the filter's state for good: such a sample is dropped.
+        if sample.gyro_rad_s.iter().chain(sample.acc_m_s2.iter()).all(|x| x.is_finite()) {
+            out.push(sample);
+        } else {
+            untimed += 1;
+        }
     }
     let stats = decoder.stats();
     if stats.bad_checksums > 0 || untimed > 0 {
-        tracing::warn!(bad_checksums = stats.bad_checksums, untimed, "external IMU: samples dropped");
+        tracing::warn!(bad_checksums = stats.bad_checksums, untimed_or_not_finite = untimed, "external IMU: samples dropped");
     }
     out
 }
@@ -81,6 +93,9 @@ fn csv_line(line: &str) -> Result<ImuSample, String> {
     if !(t.is_finite() && t >= 0.0) {
         return Err(format!("bad time {t}"));
     }
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err("a value is not finite".into());
+    }
     // Seconds with 6 decimals: round to the microsecond they were written with.
     let t_ns = ((t * 1e6).round() as u64).saturating_mul(1000);
     Ok(ImuSample { t_ns, gyro_rad_s: Vector3::new(gx, gy, gz), acc_m_s2: Vector3::new(ax, ay, az) })
@@ -99,6 +114,12 @@ mod tests {
         let s = read_external_imu(&path, 500).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(s.iter().map(|s| s.t_ns).collect::<Vec<_>>(), vec![1_000_500, 2_000_500]);
         assert_eq!(s[1].gyro_rad_s.z, 1.0);
+    }
+
+    #[test]
+    fn non_finite_values_are_refused() {
+        let e = parse(b"0.1,inf,0,0,0,0,9.8\n").err().unwrap_or_default();
+        assert!(e.contains("line 1") && e.contains("not finite"), "{e}");
     }
 
     #[test]

@@ -24,8 +24,8 @@ fn check(data: &[u8]) {
         let back = decode(&again).expect("its encoding decodes");
         match (&m, &back) {
             (
-                LinkMessage::RobotPose { stamp_ns: a, world_t_lidar: p },
-                LinkMessage::RobotPose { stamp_ns: b, world_t_lidar: q },
+                LinkMessage::RobotPose { stamp: a, world_t_lidar: p },
+                LinkMessage::RobotPose { stamp: b, world_t_lidar: q },
             ) => {
                 assert_eq!(a, b);
                 assert_eq!(p.translation, q.translation);
