@@ -64,7 +64,11 @@ fn mip(bytes: &[u8]) -> Vec<ImuSample> {
     }
     let stats = decoder.stats();
     if stats.bad_checksums > 0 || untimed > 0 {
-        tracing::warn!(bad_checksums = stats.bad_checksums, untimed_or_not_finite = untimed, "external IMU: samples dropped");
+        tracing::warn!(
+            bad_checksums = stats.bad_checksums,
+            untimed_or_not_finite = untimed,
+            "external IMU: samples dropped"
+        );
     }
     out
 }
