@@ -13,7 +13,7 @@ use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Received, Role};
 use starc_livox::live::{LivoxDriver, LivoxEvent};
 use starc_pipeline::mission::{
-    people_to_draw, AlignOutcome, AlignVerdict, RigCoreConfig, RigSide, RigSideConfig, View, HOLD_NS,
+    people_to_draw, AlignOutcome, AlignVerdict, DetectionTake, RigCoreConfig, RigSide, RigSideConfig, View, HOLD_NS,
 };
 use starc_pipeline::record::msgs::{CompressedImage, Header, Time};
 use starc_pipeline::record::Topic;
@@ -66,6 +66,9 @@ pub struct FpvSummary {
     pub alignments: u64,
     pub accepted: u64,
     pub detections_received: u64,
+    /// Refused by the rig's clock: before its first scan, or stamped too far ahead of it.
+    pub detections_refused_early: u64,
+    pub detections_refused_future: u64,
     pub map_tiles: usize,
     pub peak_rss_mib: Option<f64>,
 }
@@ -160,6 +163,9 @@ pub async fn run(
     }
     let _ = driver.stop().await;
     node.summary.map_tiles = node.side.tile_count();
+    let refused = node.side.refused();
+    (node.summary.detections_refused_early, node.summary.detections_refused_future) =
+        (refused.before_first_scan, refused.from_the_future);
     link.close().await?;
     node.summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(summary = ?node.summary, "rig node down");
@@ -250,8 +256,11 @@ impl RigNode {
                         recv_host_ns: got.recv_host_ns,
                     });
                 }
-                self.side.push_detections(stamp_here, people_to_draw(&people));
-                true
+                let take = self.side.push_detections(stamp_here, people_to_draw(&people));
+                if take == DetectionTake::RefusedFromTheFuture {
+                    tracing::debug!(stamp_here, "a detection stamped too far ahead of the rig's clock was refused");
+                }
+                take == DetectionTake::Held
             }
             _ => false,
         }

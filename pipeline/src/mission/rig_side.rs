@@ -13,6 +13,19 @@ use nalgebra::{Isometry3, Vector3};
 
 /// Detections stay on screen this long after the robot last saw them.
 pub const HOLD_NS: u64 = 1_000_000_000;
+/// A detection stamped further than this past the rig's newest scan is refused: a forged stamp
+/// or a robot clock step would otherwise hold the frame's time there, and every real person
+/// after it would be drawn at the wrong time or not at all.
+pub const MAX_DETECTION_LEAD_NS: u64 = 5_000_000_000;
+
+/// Detections the rig side refused, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RefusedDetections {
+    /// Before the rig had a scan: no clock of its own to judge them by.
+    pub before_first_scan: u64,
+    /// Stamped more than [`MAX_DETECTION_LEAD_NS`] past the rig's newest scan.
+    pub from_the_future: u64,
+}
 
 /// The rig side's settings.
 #[derive(Clone, Debug)]
@@ -41,6 +54,15 @@ pub struct RigSide {
     lidar_t_camera: Isometry3<f64>,
     render: RenderConfig,
     newest_detection_ns: u64,
+    refused: RefusedDetections,
+}
+
+/// What became of a detection handed to [`RigSide::push_detections`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DetectionTake {
+    Held,
+    RefusedBeforeFirstScan,
+    RefusedFromTheFuture,
 }
 
 impl RigSide {
@@ -54,6 +76,7 @@ impl RigSide {
             lidar_t_camera: cfg.lidar_t_camera,
             render: cfg.render,
             newest_detection_ns: 0,
+            refused: RefusedDetections::default(),
         })
     }
 
@@ -88,10 +111,25 @@ impl RigSide {
         }
     }
 
-    /// The robot's detection at `stamp_ns`, already on the rig's LiDAR clock.
-    pub fn push_detections(&mut self, stamp_ns: u64, people: Vec<ArPerson>) {
+    /// The robot's detection at `stamp_ns`, already on the rig's LiDAR clock; held unless its
+    /// time makes no sense against the rig's own scans (then counted, see [`Self::refused`]).
+    pub fn push_detections(&mut self, stamp_ns: u64, people: Vec<ArPerson>) -> DetectionTake {
+        let Some((rig_ns, _)) = self.core.last() else {
+            self.refused.before_first_scan += 1;
+            return DetectionTake::RefusedBeforeFirstScan;
+        };
+        if stamp_ns > rig_ns.saturating_add(MAX_DETECTION_LEAD_NS) {
+            self.refused.from_the_future += 1;
+            return DetectionTake::RefusedFromTheFuture;
+        }
         self.newest_detection_ns = self.newest_detection_ns.max(stamp_ns);
         self.overlay.push(stamp_ns, people);
+        DetectionTake::Held
+    }
+
+    /// Detections refused so far.
+    pub fn refused(&self) -> RefusedDetections {
+        self.refused
     }
 
     /// The newest detection's time on the rig's LiDAR clock (0 before any).
@@ -142,5 +180,76 @@ impl RigSide {
 
     pub fn overlay(&self) -> &Overlay {
         &self.overlay
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ar::OrientedBox;
+    use crate::lio::TimedPoint;
+    use nalgebra::Vector3;
+
+    const MS: u64 = 1_000_000;
+
+    fn side() -> RigSide {
+        RigSide::new(RigSideConfig {
+            core: RigCoreConfig::default(),
+            camera: CameraModel::default(),
+            lidar_t_camera: Isometry3::identity(),
+            render: RenderConfig::default(),
+            hold_ns: HOLD_NS,
+        })
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// A rig standing still until `until_ns` (IMU at 200 Hz), then one scan of a 10 m x 8 m room
+    /// ending there: the LIO's first pose.
+    fn first_pose(side: &mut RigSide, until_ns: u64) {
+        let mut outs = Vec::new();
+        let mut t = 0;
+        while t <= until_ns + 20 * MS {
+            let sample = ImuSample { t_ns: t, gyro_rad_s: Vector3::zeros(), acc_m_s2: Vector3::new(0.0, 0.0, 9.81) };
+            side.push_imu(sample, &mut outs);
+            t += 5 * MS;
+        }
+        let start_ns = until_ns - 100 * MS;
+        let mut points = Vec::new();
+        for i in 0..2000u32 {
+            let a = f64::from(i) * 0.0314;
+            let (x, y) = (5.0 * a.cos(), 4.0 * a.sin());
+            let z = -1.0 + f64::from(i % 30) * 0.1;
+            let t_ns = start_ns + u64::from(i) * 50_000;
+            points.push(TimedPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns });
+        }
+        side.push_scan(LioScan { start_ns, end_ns: until_ns, points }, &mut outs);
+        assert!(side.core().last().is_some(), "the LIO gave no pose");
+    }
+
+    fn person() -> Vec<ArPerson> {
+        let bbox =
+            OrientedBox { centre_m: Vector3::new(3.0, 0.0, 0.9), size_m: Vector3::new(0.5, 0.4, 1.8), yaw_rad: 0.0 };
+        vec![ArPerson { points_world: vec![bbox.centre_m], bbox: Some(bbox), age_ns: 0 }]
+    }
+
+    #[test]
+    fn detections_are_judged_by_the_rigs_own_clock() {
+        let mut side = side();
+        assert_eq!(side.push_detections(1_000 * MS, person()), DetectionTake::RefusedBeforeFirstScan);
+        first_pose(&mut side, 1_500 * MS);
+        let (now_ns, _) = side.core().last().unwrap_or_default();
+        // A forged stamp (or a robot clock step) an hour ahead is refused and does not move the
+        // frame's time; the real detection after it is held and drawn at its own time.
+        let forged = now_ns + 3_600_000 * MS;
+        assert_eq!(side.push_detections(forged, person()), DetectionTake::RefusedFromTheFuture);
+        assert_eq!(side.newest_detection_ns(), 0);
+        // Two sightings 100 ms apart: the overlay draws a person once a second sighting confirms them.
+        assert_eq!(side.push_detections(now_ns - 100 * MS, person()), DetectionTake::Held);
+        assert_eq!(side.push_detections(now_ns, person()), DetectionTake::Held);
+        assert_eq!(side.newest_detection_ns(), now_ns);
+        assert_eq!(side.overlay().at(now_ns).len(), 1);
+        // Within the allowed lead (clock jitter between the two LiDARs) is held.
+        assert_eq!(side.push_detections(now_ns + MAX_DETECTION_LEAD_NS, person()), DetectionTake::Held);
+        assert_eq!(side.refused(), RefusedDetections { before_first_scan: 1, from_the_future: 1 });
     }
 }
