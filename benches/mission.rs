@@ -11,10 +11,9 @@
 //! beyond one run. Latency figures depend on the machine's load: run it on a quiet machine.
 
 use serde_json::Value;
-use starc_eval::offline::{self, Offline, Start};
+use starc_eval::offline::{self, Offline};
 use starc_eval::Truth;
 use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
-use starc_pipeline::mission::RobotCoreConfig;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -85,17 +84,7 @@ fn offline(dir: &Path) -> Result<(), String> {
     let truth = Truth::load(dir).map_err(|e| e.to_string())?;
     let inputs =
         starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP).map_err(|e| e.to_string())?;
-    let run = Offline {
-        out: dir.join("offline"),
-        frames_every: 0,
-        camera: truth.mount.camera.clone(),
-        lidar_t_camera: truth.mount.lidar_t_camera,
-        start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
-        start_gate_m: 2.0,
-        robot: RobotCoreConfig::default(),
-        truth: Some(truth),
-        wall_timing: true,
-    };
+    let run = Offline::scored_with_hint(truth, dir.join("offline"), 0, true);
     offline::run(inputs, run).map(drop).map_err(|e| e.to_string())
 }
 

@@ -43,6 +43,25 @@ pub struct Offline {
     pub wall_timing: bool,
 }
 
+impl Offline {
+    /// A simulated run scored against its truth, the rig seeded as `starc mission` seeds it by
+    /// default (the true start moved 1 m and turned 20 deg, gated at 2 m): this reads the truth,
+    /// so it is for development figures, never the test set.
+    pub fn scored_with_hint(truth: Truth, out: PathBuf, frames_every: u64, wall_timing: bool) -> Self {
+        Self {
+            out,
+            frames_every,
+            camera: truth.mount.camera.clone(),
+            lidar_t_camera: truth.mount.lidar_t_camera,
+            start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
+            start_gate_m: 2.0,
+            robot: RobotCoreConfig::default(),
+            truth: Some(truth),
+            wall_timing,
+        }
+    }
+}
+
 /// What a run without truth writes to replay.json.
 #[derive(serde::Serialize)]
 pub struct ReplayReport {

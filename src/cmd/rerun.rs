@@ -57,17 +57,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 fn with_truth(dir: &std::path::Path, out: PathBuf, args: &Args) -> anyhow::Result<Offline> {
     let truth = starc_eval::Truth::load(dir)?;
-    Ok(Offline {
-        out,
-        frames_every: args.frames_every,
-        camera: truth.mount.camera.clone(),
-        lidar_t_camera: truth.mount.lidar_t_camera,
-        start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
-        start_gate_m: 2.0,
-        robot: RobotCoreConfig::default(),
-        truth: Some(truth),
-        wall_timing: !args.no_wall_timing,
-    })
+    Ok(Offline::scored_with_hint(truth, out, args.frames_every, !args.no_wall_timing))
 }
 
 fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) -> anyhow::Result<Offline> {
