@@ -236,33 +236,46 @@ impl Aligner {
         let source_reduce_ms = t0.ms();
         let first_level = self.first_level(&ndt_source);
         let src = Sources { ndt: &ndt_source, icp: &icp_source, rays };
-        let mut attempts = Vec::new();
-        let mut seeds = Vec::new();
-        let mut seed_ms = 0.0;
-        if c.reseed_yaw_step_deg > 0.0 {
-            let t1 = self.config.stopwatch.start();
-            let seed_source = thin(voxel_downsample(&icp_source, c.seed_source_voxel_m), c.seed_max_points);
-            seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
-            seed_ms = t1.ms();
-            let mut tried: Vec<Isometry3<f64>> = Vec::new();
-            self.try_seeds(&seeds, &src, first_level, &mut tried, &mut attempts);
-            // Nothing passed from the guess's position: search again at positions around it.
-            let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
-            if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
-                let t2 = self.config.stopwatch.start();
-                let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
-                seed_ms += t2.ms();
-                let before = attempts.len();
-                self.try_seeds(&more, &src, first_level, &mut tried, &mut attempts);
-                if attempts.len() == before {
-                    tracing::debug!("escalated seed search found no new basin");
-                }
-                seeds.extend(more);
-            }
+        let (attempts, seeds, seed_ms) = if c.reseed_yaw_step_deg > 0.0 {
+            self.search_seeds(&src, initial, first_level)
         } else {
-            attempts.push(self.attempt(&src, initial, first_level, 0.0, [0.0; 2]));
-        }
+            (vec![self.attempt(&src, initial, first_level, 0.0, [0.0; 2])], Vec::new(), 0.0)
+        };
         self.report(initial, attempts, seeds, icp_source.len(), source_reduce_ms, seed_ms, t0)
+    }
+
+    /// The seed search: every seed ranked on the coarse NDT levels, then full attempts on the
+    /// best-ranked until one settles (accepted or ambiguous); when none does from the guess's
+    /// position, the same again at positions `escalate_shift_m` around it. Returns the
+    /// attempts, every seed ranked, and the time spent ranking them.
+    fn search_seeds(
+        &self,
+        src: &Sources,
+        initial: &Isometry3<f64>,
+        first_level: usize,
+    ) -> (Vec<Attempt>, Vec<Seed>, f64) {
+        let c = &self.config;
+        let mut attempts = Vec::new();
+        let t1 = self.config.stopwatch.start();
+        let seed_source = thin(voxel_downsample(src.icp, c.seed_source_voxel_m), c.seed_max_points);
+        let mut seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
+        let mut seed_ms = t1.ms();
+        let mut tried: Vec<Isometry3<f64>> = Vec::new();
+        self.try_seeds(&seeds, src, first_level, &mut tried, &mut attempts);
+        // Nothing passed from the guess's position: search again at positions around it.
+        let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
+        if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
+            let t2 = self.config.stopwatch.start();
+            let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
+            seed_ms += t2.ms();
+            let before = attempts.len();
+            self.try_seeds(&more, src, first_level, &mut tried, &mut attempts);
+            if attempts.len() == before {
+                tracing::debug!("escalated seed search found no new basin");
+            }
+            seeds.extend(more);
+        }
+        (attempts, seeds, seed_ms)
     }
 
     /// Translation seeds: the guess's position (when `centre`) and positions `d` away along ±x, ±y.
@@ -461,7 +474,6 @@ impl Aligner {
         }
     }
 
-    /// The seeds (yaw grid at each seed position) refined on the coarse levels, best score first.
     /// The first NDT level whose cell is not too large for the source (`ndt_max_cell_ratio`);
     /// the finest level is always kept.
     fn first_level(&self, ndt_source: &[Vec3]) -> usize {
@@ -476,6 +488,7 @@ impl Aligner {
         self.config.ndt_resolutions_m.iter().position(|&r| r <= ratio * radius).unwrap_or(last).min(last)
     }
 
+    /// The seeds (yaw grid at each seed position) refined on the coarse levels, best score first.
     fn rank_seeds(
         &self,
         seed_source: &[Vec3],
@@ -522,6 +535,8 @@ impl Aligner {
         seeds
     }
 
+    /// One full attempt from `seed`: the NDT levels from `first_level`, ICP, the acceptance
+    /// tests, then the consistency and free-space checks of a result that passed them.
     fn attempt(
         &self,
         src: &Sources,
@@ -532,82 +547,22 @@ impl Aligner {
     ) -> Attempt {
         let c = &self.config;
         let t0 = self.config.stopwatch.start();
-        let mut pose = *seed;
-        let mut ndt_iterations = Vec::with_capacity(self.grids.len());
-        for grid in self.grids.iter().skip(first_level) {
-            let level = ndt::refine_level(grid, src.ndt, pose, c.ndt_max_iterations);
-            pose = level.pose;
-            ndt_iterations.push(level.iterations);
-        }
+        let (pose, ndt_iterations) = self.ndt_stage(src.ndt, seed, first_level);
         let ndt_ms = t0.ms();
         let t1 = self.config.stopwatch.start();
         let params = self.icp_params();
-        let mut r = icp::refine(&self.icp_target, src.icp, pose, &params);
-        // A degenerate result that explains (nearly) the whole source, so that no misfit drags
-        // it, has its weak directions settled by every pair before it is judged.
-        let settle = !at_most(c.min_degeneracy_index, r.degeneracy_index)
-            && at_most(c.pinned_min_inlier_ratio, r.inlier_ratio)
-            && !c.pinned_slides_m.is_empty();
-        if settle {
-            if let Some(settled) = self.settle_weak(&r, src.icp, &params) {
-                r = icp::refine(&self.icp_target, src.icp, settled, &params);
-            }
-        }
+        let r = self.icp_stage(src.icp, pose, &params);
         let icp_ms = t1.ms();
-        let (mut rejected_because, mut pinned) = self.judge(&r, src.icp);
-        // Consistency check: from starts around the result, ICP must not settle elsewhere with a
-        // clearly lower residual (a neighbouring minimum passes every other test: 9.7 cm off in
-        // the office grid). When one does, ICP continues from there (at most `verify_hops` times).
+        let mut judged = self.judged(r, src.icp);
         let t2 = self.config.stopwatch.start();
-        let mut probes = Vec::new();
-        let mut verify_hops = 0;
-        if rejected_because.is_empty() && c.verify_shift_m > 0.0 {
-            let probe_source = thin(src.icp.to_vec(), c.verify_max_points);
-            loop {
-                let (here, found) = self.probe(&probe_source, &r.pose, &params);
-                let better = found
-                    .iter()
-                    .filter(|p| {
-                        (p.moved_m > c.verify_agree_m || p.moved_deg > c.verify_agree_deg)
-                            && p.rms_residual_m < here.rms_residual_m * (1.0 - c.verify_margin)
-                            && p.inlier_ratio >= c.min_inlier_ratio
-                    })
-                    .min_by(|a, b| a.rms_residual_m.total_cmp(&b.rms_residual_m))
-                    .cloned();
-                probes = found;
-                let Some(better) = better else { break };
-                if verify_hops >= c.verify_hops {
-                    rejected_because.push(format!(
-                        "inconsistent: ICP from a start {:.0} cm / {:.1} deg off settles {:.1} cm / {:.2} deg away with residual {:.4} m < {:.4} m",
-                        (better.shift_m[0].hypot(better.shift_m[1])) * 100.0,
-                        better.yaw_deg.abs(),
-                        better.moved_m * 100.0,
-                        better.moved_deg,
-                        better.rms_residual_m,
-                        here.rms_residual_m
-                    ));
-                    break;
-                }
-                verify_hops += 1;
-                r = icp::refine(&self.icp_target, src.icp, better.pose, &params);
-                (rejected_because, pinned) = self.judge(&r, src.icp);
-                if !rejected_because.is_empty() {
-                    break;
-                }
-            }
-        }
-        let free_space = (rejected_because.is_empty() && c.free_space_rays > 0 && !src.rays.is_empty())
-            .then(|| self.surfels.check(src.rays, &r.pose, &self.ray_params()));
-        if let Some(f) = free_space.as_ref().filter(|f| f.blocked_ratio > c.free_space_max_blocked) {
-            rejected_because.push(format!(
-                "sees through the map: {} of {} rays ({:.0} %) cross a mapped surface before their end (at most {:.0} %)",
-                f.blocked,
-                f.rays,
-                f.blocked_ratio * 100.0,
-                c.free_space_max_blocked * 100.0
-            ));
-        }
+        let (probes, verify_hops) = if judged.rejected_because.is_empty() && c.verify_shift_m > 0.0 {
+            self.verify_consistency(src.icp, &params, &mut judged)
+        } else {
+            (Vec::new(), 0)
+        };
+        let free_space = self.check_free_space(src.rays, &mut judged);
         let verify_ms = t2.ms();
+        let Judged { r, rejected_because, pinned } = judged;
         Attempt {
             seed_yaw_offset_deg,
             seed_shift_m,
@@ -628,6 +583,99 @@ impl Aligner {
             free_space,
             pinned,
         }
+    }
+
+    /// NDT from `seed` through every level from `first_level`, coarse to fine: the pose after
+    /// the last and the iterations of each.
+    fn ndt_stage(&self, source: &[Vec3], seed: &Isometry3<f64>, first_level: usize) -> (Isometry3<f64>, Vec<u32>) {
+        let mut pose = *seed;
+        let mut ndt_iterations = Vec::with_capacity(self.grids.len());
+        for grid in self.grids.iter().skip(first_level) {
+            let level = ndt::refine_level(grid, source, pose, self.config.ndt_max_iterations);
+            pose = level.pose;
+            ndt_iterations.push(level.iterations);
+        }
+        (pose, ndt_iterations)
+    }
+
+    /// ICP from the NDT result. A degenerate result that explains (nearly) the whole source, so
+    /// that no misfit drags it, has its weak directions settled by every pair and ICP runs again
+    /// from there, before it is judged.
+    fn icp_stage(&self, source: &[Vec3], pose: Isometry3<f64>, params: &IcpParams) -> icp::IcpResult {
+        let c = &self.config;
+        let r = icp::refine(&self.icp_target, source, pose, params);
+        let settle = !at_most(c.min_degeneracy_index, r.degeneracy_index)
+            && at_most(c.pinned_min_inlier_ratio, r.inlier_ratio)
+            && !c.pinned_slides_m.is_empty();
+        if settle {
+            if let Some(settled) = self.settle_weak(&r, source, params) {
+                return icp::refine(&self.icp_target, source, settled, params);
+            }
+        }
+        r
+    }
+
+    /// An ICP result with the acceptance tests' verdict on it ([`Aligner::judge`]).
+    fn judged(&self, r: icp::IcpResult, source: &[Vec3]) -> Judged {
+        let (rejected_because, pinned) = self.judge(&r, source);
+        Judged { r, rejected_because, pinned }
+    }
+
+    /// Consistency check of a result that passed the tests: from starts around it, ICP must not
+    /// settle elsewhere with a clearly lower residual (a neighbouring minimum passes every other
+    /// test: 9.7 cm off in the office grid). When one does, ICP continues from there and the new
+    /// result is judged again, at most `verify_hops` times; one more such landing rejects it.
+    /// Returns the last round of probes and the hops made.
+    fn verify_consistency(&self, source: &[Vec3], params: &IcpParams, judged: &mut Judged) -> (Vec<Probe>, u32) {
+        let probe_source = thin(source.to_vec(), self.config.verify_max_points);
+        let mut hops: u32 = 0;
+        loop {
+            let (here, found) = self.probe(&probe_source, &judged.r.pose, params);
+            let Some(better) = self.better_landing(&here, &found) else { return (found, hops) };
+            if hops >= self.config.verify_hops {
+                judged.rejected_because.push(inconsistent(&better, &here));
+                return (found, hops);
+            }
+            hops += 1;
+            *judged = self.judged(icp::refine(&self.icp_target, source, better.pose, params), source);
+            if !judged.rejected_because.is_empty() {
+                return (found, hops);
+            }
+        }
+    }
+
+    /// Of the probes, the one with the lowest residual among those that settled away from the
+    /// result (beyond `verify_agree_*`) with a residual clearly below its (`verify_margin`) and
+    /// enough inliers.
+    fn better_landing(&self, here: &Probe, found: &[Probe]) -> Option<Probe> {
+        let c = &self.config;
+        found
+            .iter()
+            .filter(|p| {
+                (p.moved_m > c.verify_agree_m || p.moved_deg > c.verify_agree_deg)
+                    && p.rms_residual_m < here.rms_residual_m * (1.0 - c.verify_margin)
+                    && p.inlier_ratio >= c.min_inlier_ratio
+            })
+            .min_by(|a, b| a.rms_residual_m.total_cmp(&b.rms_residual_m))
+            .cloned()
+    }
+
+    /// The free-space check of a result that passed every other test, when the source came with
+    /// rays: too many rays crossing a mapped surface before their end reject it.
+    fn check_free_space(&self, rays: &[Ray], judged: &mut Judged) -> Option<FreeSpace> {
+        let c = &self.config;
+        let free_space = (judged.rejected_because.is_empty() && c.free_space_rays > 0 && !rays.is_empty())
+            .then(|| self.surfels.check(rays, &judged.r.pose, &self.ray_params()));
+        if let Some(f) = free_space.as_ref().filter(|f| f.blocked_ratio > c.free_space_max_blocked) {
+            judged.rejected_because.push(format!(
+                "sees through the map: {} of {} rays ({:.0} %) cross a mapped surface before their end (at most {:.0} %)",
+                f.blocked,
+                f.rays,
+                f.blocked_ratio * 100.0,
+                c.free_space_max_blocked * 100.0
+            ));
+        }
+        free_space
     }
 
     /// The acceptance tests of an ICP result; one refused for its degeneracy index alone gets
@@ -793,6 +841,28 @@ struct Sources<'a> {
     ndt: &'a [Vec3],
     icp: &'a [Vec3],
     rays: &'a [Ray],
+}
+
+/// An ICP result and the acceptance tests' verdict on it.
+struct Judged {
+    r: icp::IcpResult,
+    /// Which tests failed (empty when it passed).
+    rejected_because: Vec<String>,
+    pinned: Option<PinnedCheck>,
+}
+
+/// Why a result is refused when ICP from a start off it still lands on a better fit after
+/// every hop allowed.
+fn inconsistent(better: &Probe, here: &Probe) -> String {
+    format!(
+        "inconsistent: ICP from a start {:.0} cm / {:.1} deg off settles {:.1} cm / {:.2} deg away with residual {:.4} m < {:.4} m",
+        (better.shift_m[0].hypot(better.shift_m[1])) * 100.0,
+        better.yaw_deg.abs(),
+        better.moved_m * 100.0,
+        better.moved_deg,
+        better.rms_residual_m,
+        here.rms_residual_m
+    )
 }
 
 fn metrics_of(r: &icp::IcpResult) -> AlignMetrics {

@@ -5,7 +5,7 @@ use super::classify::{score, score_behind, score_followed, tallest_scorable_m, t
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
 use super::floor::estimate_floor;
-use super::follow::tracks;
+use super::follow::{tracks, Track};
 use super::fov::FovEnvelope;
 use super::occlusion::{RangeImage, Silhouette};
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
@@ -86,64 +86,44 @@ impl Detector for GeometricDetector {
     }
 
     fn detect(&mut self, window: &DetectWindow<'_>, out: &mut Vec<Detection>) {
-        let cfg = &self.cfg;
         self.last_clusters.clear();
         self.last_cluster_points.clear();
         self.last_silhouettes.clear();
-        let now_ns = window.stamp.ns;
-        let follow_ns = (cfg.follow_s * 1e9) as u64;
-        // A window older than one already seen (a replay restarted) follows nobody.
-        // Confirmations are kept twice as long as a person is followed: all of them count
-        // towards the track, the last one starts the time it is followed for.
-        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
-        let followed = std::mem::take(&mut self.confirmed);
-        let tracks = tracks(&followed, cfg.follow_radius_m, cfg.follow_walk_mps);
-        let near_followed = |xy: Vector2<f64>| {
-            tracks.iter().any(|tr| {
-                tr.confirmations >= cfg.follow_min_confirmations
-                    && now_ns - tr.t_ns <= follow_ns
-                    && tr.reaches(xy, now_ns, cfg.follow_radius_m)
-            })
-        };
-        // Partial views of followed people, kept once every full confirmation of this window is
-        // known: a piece of someone confirmed whole here is not a second person.
-        let mut partial: Vec<(ClusterFeatures, PersonPose, f64, Vec<u32>)> = Vec::new();
-        let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
-        let sensor = window.sensor_pose.translation.vector;
-        let floor = estimate_floor(window.points, sensor.z, cfg);
-        self.last_floor = Some(floor);
-        let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
+        let followed = self.take_followed(window.stamp.ns);
+        let scene = Scene::new(window, &self.cfg, &followed);
+        self.last_floor = Some(scene.floor);
+        keep_above_floor(&mut self.kept, &scene, &self.cfg);
+        let confirmed_now = self.judge_clusters(&scene, out);
+        self.confirmed = followed;
+        self.confirmed.extend(confirmed_now);
+    }
+}
 
-        self.kept.clear();
-        for (i, p) in window.points.iter().enumerate() {
-            let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
-            let h = floor.height(x, y, f64::from(p.z_m));
-            // Beyond 10 km is garbage, and would overflow the voxel keys.
-            let sane = x.abs() < 1e4 && y.abs() < 1e4 && h.abs() < 1e4;
-            if h > cfg.floor_band_m && h < top && sane {
-                self.kept.push((i as u32, Vector3::new(x, y, h)));
-            }
-        }
+impl GeometricDetector {
+    /// The confirmations still followed at `now_ns`, taken out of `self.confirmed` (the caller
+    /// puts them back with this window's own). A window older than one already seen (a replay
+    /// restarted) follows nobody. Confirmations are kept twice as long as a person is followed:
+    /// all of them count towards the track, the last one starts the time it is followed for.
+    fn take_followed(&mut self, now_ns: u64) -> Vec<(Vector2<f64>, u64)> {
+        let follow_ns = follow_ns(&self.cfg);
+        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
+        std::mem::take(&mut self.confirmed)
+    }
+
+    /// Scores every cluster of the kept points (splitting the ones bigger than anyone) and
+    /// pushes the people found to `out`; returns where each was confirmed whole. Partial views
+    /// of followed people go last, once every full confirmation of the window is known: a piece
+    /// of someone confirmed whole here is not a second person.
+    fn judge_clusters(&mut self, scene: &Scene<'_, '_>, out: &mut Vec<Detection>) -> Vec<(Vector2<f64>, u64)> {
+        let cfg = &self.cfg;
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
-        let points = window.points;
-        let lookup = |i: u32| {
-            points.get(i as usize).map(|p| {
-                let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
-                Vector3::new(x, y, floor.height(x, y, f64::from(p.z_m)))
-            })
-        };
-        // Voxels needed before a cluster is worth scoring: a person at the far end of the
-        // window still fills a few.
-        let min_voxels = 3;
+        let mut partial: Vec<PartialView> = Vec::new();
+        let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
         let mut stack: Vec<(Vec<u32>, usize)> = grid.all_components().into_iter().map(|c| (c, 0)).collect();
         while let Some((cluster, depth)) = stack.pop() {
-            if cluster.len() < min_voxels {
-                continue;
-            }
-            let npts: usize = cluster.iter().map(|&v| grid.points_of(v).len()).sum();
-            if npts < cfg.min_points {
+            if !enough_to_score(&grid, &cluster, cfg) {
                 continue;
             }
             // Taller than anyone (a wall, a shelf): no posture can score it, so only split it,
@@ -155,94 +135,26 @@ impl Detector for GeometricDetector {
                 }
                 continue;
             }
-            // The face share only where it can decide: the scores fall as it grows, so one
-            // that fails with a share of 0 (and is no structure a followed person could be)
-            // fails with any.
-            let worth_faces = |f: &ClusterFeatures| {
-                let xy = Vector2::new(f.centre.x, f.centre.y);
-                let structure = f.top_m > top - CEILING_CONTACT_M;
-                self.keep_cluster_points
-                    || (!structure
-                        && (score(f, cfg).1 >= cfg.min_score
-                            || (follow_ns > 0 && score_followed(f, cfg).1 >= cfg.min_score && near_followed(xy))))
-            };
-            let Some(f) = features(&grid, &cluster, &lookup, [sensor.x, sensor.y], cfg.face_tolerance_m, &worth_faces)
-            else {
+            let Some((f, pose, s)) = scene.rate(&grid, &cluster, cfg, self.keep_cluster_points, &mut envelope) else {
                 continue;
             };
-            let (mut pose, mut s) = score(&f, cfg);
-            // Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
-            let structure = f.top_m > top - CEILING_CONTACT_M;
-            if structure {
-                s = 0.0;
-            }
-            // Head and shoulders over something nearer: the silhouette decides (a cone of the
-            // window around the cluster, for the few clusters shaped like one).
-            if s < cfg.min_score && !structure && cfg.behind_min_edge_share > 0.0 {
-                let behind = score_behind(&f, cfg);
-                if behind >= cfg.min_score {
-                    let idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
-                    let seen = RangeImage::around(points, &window.sensor_pose, &idx)
-                        .map(|image| image.silhouette(points, idx.iter().copied()))
-                        .unwrap_or_default();
-                    let share = cfg.behind_min_edge_share;
-                    if seen.top_columns > 0 && seen.top_free >= share && seen.bottom_hidden >= share {
-                        (pose, s) = (PersonPose::Low, behind);
-                    }
-                }
-            }
             if self.keep_cluster_points {
-                let idx: Vec<u32> = grid.points_of_cluster(&cluster).collect();
-                let image = RangeImage::around(points, &window.sensor_pose, &idx);
-                self.last_silhouettes
-                    .push(image.map(|im| im.silhouette(points, idx.iter().copied())).unwrap_or_default());
+                let (silhouette, idx) = silhouette_of(scene.window, &grid, &cluster);
+                self.last_silhouettes.push(silhouette);
                 self.last_cluster_points.push(idx);
             }
-            // Cut by the top of the field of view, its height is the view's: only a cluster
-            // already as tall as a standing person can be one (checked for candidates only: it
-            // costs a transform per point).
-            let short_of_upright = pose != PersonPose::Upright || f.size.z < cfg.upright_height_m[0];
-            if s >= cfg.min_score && pose != PersonPose::Lying && short_of_upright && cfg.fov_edge_margin_deg > 0.0 {
-                let env =
-                    envelope.get_or_insert_with(|| FovEnvelope::new(points, &window.sensor_pose, window.stamp.ns));
-                if env.cuts(points, grid.points_of_cluster(&cluster), cfg.fov_edge_margin_deg) {
-                    s = 0.0;
-                }
-            }
-            let xy = Vector2::new(f.centre.x, f.centre.y);
-            tracing::trace!(
-                stamp_ns = now_ns,
-                x_m = f.centre.x,
-                y_m = f.centre.y,
-                size_m = ?[f.size.x, f.size.y, f.size.z],
-                top_m = f.top_m,
-                points = f.points,
-                face_share = f.face_share,
-                thickness_m = f.thickness_m,
-                planarity = f.planarity,
-                linearity = f.linearity,
-                score = s,
-                "cluster scored"
-            );
+            trace_cluster(scene.now_ns, &f, s);
             if s >= cfg.min_score {
-                confirmed_now.push((xy, now_ns));
-                out.push(detection(window, &floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
+                confirmed_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
+                out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
                 self.last_clusters.push((f, s));
                 continue;
             }
-            if !structure && follow_ns > 0 && near_followed(xy) {
-                // Someone every gate saw here moments ago: judged as a partial view of them.
-                let (followed_pose, followed_score) = score_followed(&f, cfg);
-                if followed_score >= cfg.min_score {
-                    partial.push((
-                        f.clone(),
-                        followed_pose,
-                        followed_score,
-                        grid.points_of_cluster(&cluster).collect(),
-                    ));
-                    self.last_clusters.push((f, followed_score));
-                    continue;
-                }
+            if let Some((followed_pose, followed_score)) = scene.as_followed(&f, cfg) {
+                let idx = grid.points_of_cluster(&cluster).collect();
+                partial.push((f.clone(), followed_pose, followed_score, idx));
+                self.last_clusters.push((f, followed_score));
+                continue;
             }
             let split_it = depth < cfg.max_planes && too_big(&f, cfg);
             self.last_clusters.push((f, s));
@@ -250,17 +162,222 @@ impl Detector for GeometricDetector {
                 stack.extend(split(&grid, &cluster, cfg, depth));
             }
         }
-        partial.sort_by(|a, b| b.2.total_cmp(&a.2));
-        let mut taken: Vec<Vector2<f64>> = confirmed_now.iter().map(|c| c.0).collect();
-        for (f, pose, s, idx) in partial {
-            let xy = Vector2::new(f.centre.x, f.centre.y);
-            if taken.iter().all(|at| (at - xy).norm() > cfg.follow_radius_m) {
-                taken.push(xy);
-                out.push(detection(window, &floor, &f, pose, s, idx.into_iter(), cfg));
+        push_partial_views(partial, &confirmed_now, scene, cfg, out);
+        confirmed_now
+    }
+}
+
+/// A cluster scored as a partial view of someone followed: its features, posture, score and
+/// point indices.
+type PartialView = (ClusterFeatures, PersonPose, f64, Vec<u32>);
+
+/// How long a person confirmed by every gate is followed (ns).
+fn follow_ns(cfg: &DetectConfig) -> u64 {
+    (cfg.follow_s * 1e9) as u64
+}
+
+/// One window as its clusters see it: the floor, the ceiling cut and the people followed into
+/// it. Fixed for the window, so every cluster is judged against the same.
+struct Scene<'s, 'w> {
+    window: &'s DetectWindow<'w>,
+    now_ns: u64,
+    follow_ns: u64,
+    tracks: Vec<Track>,
+    /// The sensor's position in the world.
+    sensor: Vector3<f64>,
+    floor: FloorModel,
+    /// Height above the floor where the ceiling band starts (`f64::MAX` without a ceiling).
+    top: f64,
+}
+
+impl<'s, 'w> Scene<'s, 'w> {
+    fn new(window: &'s DetectWindow<'w>, cfg: &DetectConfig, followed: &[(Vector2<f64>, u64)]) -> Self {
+        let tracks = tracks(followed, cfg.follow_radius_m, cfg.follow_walk_mps);
+        let sensor = window.sensor_pose.translation.vector;
+        let floor = estimate_floor(window.points, sensor.z, cfg);
+        let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
+        Self { window, now_ns: window.stamp.ns, follow_ns: follow_ns(cfg), tracks, sensor, floor, top }
+    }
+
+    /// Whether someone every gate confirmed often and lately may have walked to `xy` by now.
+    fn near_followed(&self, xy: Vector2<f64>, cfg: &DetectConfig) -> bool {
+        self.tracks.iter().any(|tr| {
+            tr.confirmations >= cfg.follow_min_confirmations
+                && self.now_ns - tr.t_ns <= self.follow_ns
+                && tr.reaches(xy, self.now_ns, cfg.follow_radius_m)
+        })
+    }
+
+    /// Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
+    fn is_structure(&self, f: &ClusterFeatures) -> bool {
+        f.top_m > self.top - CEILING_CONTACT_M
+    }
+
+    /// Point `i` of the window with its height above the floor as z.
+    fn above_floor(&self, i: u32) -> Option<Vector3<f64>> {
+        self.window.points.get(i as usize).map(|p| {
+            let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
+            Vector3::new(x, y, self.floor.height(x, y, f64::from(p.z_m)))
+        })
+    }
+
+    /// The face share only where it can decide: the scores fall as it grows, so a cluster that
+    /// fails with a share of 0 (and is no structure a followed person could be) fails with any.
+    fn worth_faces(&self, f: &ClusterFeatures, cfg: &DetectConfig) -> bool {
+        let xy = Vector2::new(f.centre.x, f.centre.y);
+        !self.is_structure(f)
+            && (score(f, cfg).1 >= cfg.min_score
+                || (self.follow_ns > 0 && score_followed(f, cfg).1 >= cfg.min_score && self.near_followed(xy, cfg)))
+    }
+
+    /// A cluster's features, posture and score as a person on its own (None when it has no
+    /// features). `keep_all` measures every cluster's face share (tuning).
+    fn rate(
+        &self,
+        grid: &Grid,
+        cluster: &[u32],
+        cfg: &DetectConfig,
+        keep_all: bool,
+        envelope: &mut Option<FovEnvelope>,
+    ) -> Option<(ClusterFeatures, PersonPose, f64)> {
+        let sensor_xy = [self.sensor.x, self.sensor.y];
+        let worth_faces = |f: &ClusterFeatures| keep_all || self.worth_faces(f, cfg);
+        let f = features(grid, cluster, &|i| self.above_floor(i), sensor_xy, cfg.face_tolerance_m, &worth_faces)?;
+        let (pose, mut s) = self.posture_score(grid, cluster, &f, cfg);
+        if may_be_cut(&f, pose, s, cfg) {
+            let env = envelope.get_or_insert_with(|| {
+                FovEnvelope::new(self.window.points, &self.window.sensor_pose, self.window.stamp.ns)
+            });
+            if env.cuts(self.window.points, grid.points_of_cluster(cluster), cfg.fov_edge_margin_deg) {
+                s = 0.0;
             }
         }
-        self.confirmed = followed;
-        self.confirmed.extend(confirmed_now);
+        Some((f, pose, s))
+    }
+
+    /// The posture and score of a cluster's features: structure scores 0; head and shoulders
+    /// over something nearer are a person low behind it when the silhouette says so.
+    fn posture_score(
+        &self,
+        grid: &Grid,
+        cluster: &[u32],
+        f: &ClusterFeatures,
+        cfg: &DetectConfig,
+    ) -> (PersonPose, f64) {
+        let (mut pose, mut s) = score(f, cfg);
+        let structure = self.is_structure(f);
+        if structure {
+            s = 0.0;
+        }
+        if s < cfg.min_score && !structure && cfg.behind_min_edge_share > 0.0 {
+            let behind = score_behind(f, cfg);
+            if behind >= cfg.min_score && self.hidden_below(grid, cluster, cfg) {
+                (pose, s) = (PersonPose::Low, behind);
+            }
+        }
+        (pose, s)
+    }
+
+    /// Whether the cluster's silhouette (a cone of the window around it, for the few clusters
+    /// shaped like head and shoulders) is free above and hidden below by something nearer.
+    fn hidden_below(&self, grid: &Grid, cluster: &[u32], cfg: &DetectConfig) -> bool {
+        let points = self.window.points;
+        let idx: Vec<u32> = grid.points_of_cluster(cluster).collect();
+        let seen = RangeImage::around(points, &self.window.sensor_pose, &idx)
+            .map(|image| image.silhouette(points, idx.iter().copied()))
+            .unwrap_or_default();
+        let share = cfg.behind_min_edge_share;
+        seen.top_columns > 0 && seen.top_free >= share && seen.bottom_hidden >= share
+    }
+
+    /// A cluster too weak alone but near someone followed (and no structure), scored as a
+    /// partial view of them; None when that fails too.
+    fn as_followed(&self, f: &ClusterFeatures, cfg: &DetectConfig) -> Option<(PersonPose, f64)> {
+        let xy = Vector2::new(f.centre.x, f.centre.y);
+        if self.is_structure(f) || self.follow_ns == 0 || !self.near_followed(xy, cfg) {
+            return None;
+        }
+        let (pose, s) = score_followed(f, cfg);
+        (s >= cfg.min_score).then_some((pose, s))
+    }
+}
+
+/// The points between the floor band and the ceiling cut, each with its height above the
+/// floor as z (what the voxel clusters are built from).
+fn keep_above_floor(kept: &mut Vec<(u32, Vector3<f64>)>, scene: &Scene<'_, '_>, cfg: &DetectConfig) {
+    kept.clear();
+    for (i, p) in scene.window.points.iter().enumerate() {
+        let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
+        let h = scene.floor.height(x, y, f64::from(p.z_m));
+        // Beyond 10 km is garbage, and would overflow the voxel keys.
+        let sane = x.abs() < 1e4 && y.abs() < 1e4 && h.abs() < 1e4;
+        if h > cfg.floor_band_m && h < scene.top && sane {
+            kept.push((i as u32, Vector3::new(x, y, h)));
+        }
+    }
+}
+
+/// Whether a cluster holds enough to be scored: a person at the far end of the window still
+/// fills a few voxels and `min_points` points.
+fn enough_to_score(grid: &Grid, cluster: &[u32], cfg: &DetectConfig) -> bool {
+    const MIN_VOXELS: usize = 3;
+    if cluster.len() < MIN_VOXELS {
+        return false;
+    }
+    let npts: usize = cluster.iter().map(|&v| grid.points_of(v).len()).sum();
+    npts >= cfg.min_points
+}
+
+/// Whether a candidate's height may be the field of view's rather than its own: cut by the top
+/// of the view, only a cluster already as tall as a standing person can be one (checked for
+/// candidates only: the check costs a transform per point).
+fn may_be_cut(f: &ClusterFeatures, pose: PersonPose, s: f64, cfg: &DetectConfig) -> bool {
+    let short_of_upright = pose != PersonPose::Upright || f.size.z < cfg.upright_height_m[0];
+    s >= cfg.min_score && pose != PersonPose::Lying && short_of_upright && cfg.fov_edge_margin_deg > 0.0
+}
+
+/// A cluster's silhouette and point indices, kept for tuning the scorer.
+fn silhouette_of(window: &DetectWindow<'_>, grid: &Grid, cluster: &[u32]) -> (Silhouette, Vec<u32>) {
+    let points = window.points;
+    let idx: Vec<u32> = grid.points_of_cluster(cluster).collect();
+    let image = RangeImage::around(points, &window.sensor_pose, &idx);
+    (image.map(|im| im.silhouette(points, idx.iter().copied())).unwrap_or_default(), idx)
+}
+
+fn trace_cluster(now_ns: u64, f: &ClusterFeatures, s: f64) {
+    tracing::trace!(
+        stamp_ns = now_ns,
+        x_m = f.centre.x,
+        y_m = f.centre.y,
+        size_m = ?[f.size.x, f.size.y, f.size.z],
+        top_m = f.top_m,
+        points = f.points,
+        face_share = f.face_share,
+        thickness_m = f.thickness_m,
+        planarity = f.planarity,
+        linearity = f.linearity,
+        score = s,
+        "cluster scored"
+    );
+}
+
+/// The partial views of followed people, best score first, each pushed unless someone was
+/// already taken within `follow_radius_m` of it.
+fn push_partial_views(
+    mut partial: Vec<PartialView>,
+    confirmed_now: &[(Vector2<f64>, u64)],
+    scene: &Scene<'_, '_>,
+    cfg: &DetectConfig,
+    out: &mut Vec<Detection>,
+) {
+    partial.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let mut taken: Vec<Vector2<f64>> = confirmed_now.iter().map(|c| c.0).collect();
+    for (f, pose, s, idx) in partial {
+        let xy = Vector2::new(f.centre.x, f.centre.y);
+        if taken.iter().all(|at| (at - xy).norm() > cfg.follow_radius_m) {
+            taken.push(xy);
+            out.push(detection(scene.window, &scene.floor, &f, pose, s, idx.into_iter(), cfg));
+        }
     }
 }
 

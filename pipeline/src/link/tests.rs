@@ -151,7 +151,7 @@ fn every_truncation_is_refused() {
 /// Rewrites a frame's payload and fixes up length and CRC, so only the payload check can refuse.
 fn reframe(kind: u8, payload: &[u8]) -> Vec<u8> {
     let mut b = b"STLK".to_vec();
-    b.push(1);
+    b.push(2);
     b.push(kind);
     b.extend_from_slice(&[0, 0]);
     b.extend_from_slice(&(payload.len() as u32).to_le_bytes());
@@ -164,15 +164,19 @@ fn reframe(kind: u8, payload: &[u8]) -> Vec<u8> {
 #[test]
 fn oversize_counts_are_refused_before_allocating() {
     // A detections payload that claims u32::MAX people, then one claiming 2^30 points.
-    let mut p = Vec::new();
-    p.extend_from_slice(&1u32.to_le_bytes());
-    p.extend_from_slice(&[0; 24]);
+    let detections_head = || {
+        let mut p = Vec::new();
+        p.extend_from_slice(&1u32.to_le_bytes());
+        p.extend_from_slice(&[0; 8]);
+        p.push(2); // PTP
+        p.extend_from_slice(&[0; 16]);
+        p
+    };
+    let mut p = detections_head();
     p.extend_from_slice(&u32::MAX.to_le_bytes());
     assert!(matches!(decode(&reframe(5, &p)), Err(PipelineError::BadFile { .. })));
 
-    let mut p = Vec::new();
-    p.extend_from_slice(&1u32.to_le_bytes());
-    p.extend_from_slice(&[0; 24]);
+    let mut p = detections_head();
     p.extend_from_slice(&1u32.to_le_bytes());
     p.extend_from_slice(&0.5f32.to_le_bytes());
     p.extend_from_slice(&[0; 56]);
@@ -199,15 +203,19 @@ fn oversize_counts_are_refused_before_allocating() {
 #[test]
 fn unknown_kind_version_role_and_bad_values_are_refused() {
     assert!(matches!(decode(&reframe(9, &[])), Err(PipelineError::Unsupported { .. })));
-    let mut b = encode(&every_kind()[2]).unwrap();
-    b[4] = 2;
-    assert!(decode(&b).is_err());
+    // Format 1 (before stamps carried their clock) and a future 3.
+    for version in [1, 3] {
+        let mut b = encode(&every_kind()[2]).unwrap();
+        b[4] = version;
+        assert!(decode(&b).is_err());
+    }
     // Heartbeat with role 3.
     let mut p = vec![3, 0, 0, 0];
     p.extend_from_slice(&[0; 16]);
     assert!(decode(&reframe(1, &p)).is_err());
     // A pose whose quaternion is not unit.
     let mut p = 5u64.to_le_bytes().to_vec();
+    p.push(2);
     for v in [0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0] {
         p.extend_from_slice(&v.to_le_bytes());
     }

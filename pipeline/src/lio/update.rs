@@ -14,7 +14,7 @@
 use super::ivox::VoxelMap;
 use super::plane::{self, Plane};
 use super::state::{Cov, ErrVec, State, DIM};
-use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
+use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6, U6};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UpdateConfig {
@@ -81,100 +81,19 @@ pub fn update(
     let Some(p_inv) = cov.try_inverse() else { return report };
     let prior = state.clone();
     let mut x = state.clone();
-    let mut nn = Vec::with_capacity(cfg.neighbours);
-    let mut nbrs: Vec<Vector3<f64>> = Vec::with_capacity(cfg.neighbours);
+    let mut planes = Planes::new(points.len(), cfg.neighbours);
     let mut posterior = *cov;
-    // Each point's plane; searched again only after a step large enough to change neighbours
-    // (the search is most of an iteration's cost).
-    let mut planes: Vec<Option<Plane>> = Vec::with_capacity(points.len());
     let mut search = true;
     for it in 0..cfg.max_iterations {
-        let (mut hth, mut htz) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
-        let (mut n_used, mut sum_sq, mut sum_range) = (0usize, 0.0, 0.0);
-        let mut scaled = Matrix6::<f64>::zeros();
-        if search {
-            planes.clear();
-        }
-        for (i, p) in points.iter().enumerate() {
-            let q = x.rot_imu_lidar * p + x.pos_imu_lidar;
-            let w = x.rot * q + x.pos;
-            if search {
-                map.nearest(&w, cfg.neighbours, cfg.max_neighbour_dist_m, &mut nn);
-                let plane = if nn.len() < cfg.neighbours {
-                    None
-                } else {
-                    nbrs.clear();
-                    nbrs.extend(nn.iter().map(|(_, v)| *v));
-                    plane::fit(&nbrs, cfg.max_plane_dev_m)
-                };
-                planes.push(plane);
-            }
-            let Some(pl) = planes.get(i).copied().flatten() else { continue };
-            let r = pl.normal.dot(&w) + pl.offset;
-            // FAST-LIO's gate: farther points may sit farther from their plane.
-            if r.abs() * 9.0 > p.norm().sqrt() {
-                continue;
-            }
-            let j_rot = q.cross(&(x.rot.inverse() * pl.normal));
-            let row = Vector6::new(j_rot.x, j_rot.y, j_rot.z, pl.normal.x, pl.normal.y, pl.normal.z);
-            hth += row * row.transpose();
-            htz += row * r;
-            n_used += 1;
-            sum_sq += r * r;
-            sum_range += q.norm();
-        }
+        let mut eq = planes.normal_equations(points, &x, map, cfg, search);
         report.iterations = it + 1;
-        report.matched = n_used;
-        if n_used < 20 {
+        report.matched = eq.n_used;
+        if eq.n_used < 20 {
             report.matched = 0;
             return report;
         }
-        let l = (sum_range / n_used as f64).max(1e-3);
-        let mut s = Vector6::repeat(1.0);
-        s.fixed_rows_mut::<3>(0).fill(1.0 / l);
-        scaled.copy_from(&(Matrix6::from_diagonal(&s) * hth * Matrix6::from_diagonal(&s) / n_used as f64));
-        let eigen = SymmetricEigen::new(scaled);
-        report.degeneracy_index = eigen.eigenvalues.min();
-        report.rms_m = (sum_sq / n_used as f64).sqrt();
-        report.weak_directions = eigen.eigenvalues.iter().filter(|&&l| l < cfg.min_direction_info).count();
-        if report.weak_directions > 0 && tracing::enabled!(tracing::Level::TRACE) {
-            for (l, v) in eigen.eigenvalues.iter().zip(eigen.eigenvectors.column_iter()) {
-                if *l < cfg.min_direction_info {
-                    let v: Vec<String> = v.iter().map(|c| format!("{c:+.2}")).collect();
-                    tracing::trace!(
-                        it,
-                        info = l,
-                        direction = v.join(" "),
-                        "left to the IMU (rx ry rz x y z, unit-free)"
-                    );
-                }
-            }
-        }
-        if report.weak_directions > 0 {
-            // Keep only the information along well-constrained directions (projected in the
-            // unit-free coordinates where the eigenvalues were taken, then scaled back).
-            let mut keep = Matrix6::<f64>::zeros();
-            for (i, l) in eigen.eigenvalues.iter().enumerate() {
-                if *l >= cfg.min_direction_info {
-                    let v = eigen.eigenvectors.column(i);
-                    keep += v * v.transpose();
-                }
-            }
-            let s_inv = Matrix6::from_diagonal(&s.map(|v| 1.0 / v));
-            let to = s_inv * keep * Matrix6::from_diagonal(&s);
-            hth = to * hth * to.transpose();
-            htz = to * htz;
-        }
-
-        let mut info = p_inv;
-        let mut ff = info.fixed_view_mut::<6, 6>(0, 0);
-        ff += hth / cfg.residual_var_m2;
-        let e = x.boxminus(&prior);
-        let mut rhs = -(p_inv * e);
-        let mut top = rhs.fixed_rows_mut::<6>(0);
-        top -= htz / cfg.residual_var_m2;
-        let Some(info_inv) = info.try_inverse() else { return report };
-        let dx: ErrVec = info_inv * rhs;
+        eq.condition(cfg, it, &mut report);
+        let Some((dx, info_inv)) = solve(&p_inv, &x, &prior, &eq, cfg) else { return report };
         x = x.boxplus(&dx);
         posterior = info_inv;
         let rot_step = dx.fixed_rows::<3>(0).norm();
@@ -189,6 +108,149 @@ pub fn update(
     *state = x;
     *cov = (posterior + posterior.transpose()) * 0.5;
     report
+}
+
+/// Each point's plane in the map, with the scratch space of the neighbour search. Searched
+/// again only after a step large enough to change neighbours (the search is most of an
+/// iteration's cost); otherwise the planes of the last search are kept.
+struct Planes {
+    of_point: Vec<Option<Plane>>,
+    nn: Vec<(f64, Vector3<f64>)>,
+    nbrs: Vec<Vector3<f64>>,
+}
+
+/// The point-to-plane normal equations of one iteration over the 6 pose columns (rotation,
+/// position): `H^T H` and `H^T z` of the residuals that passed the gate, and their sums.
+struct NormalEquations {
+    hth: Matrix6<f64>,
+    htz: Vector6<f64>,
+    n_used: usize,
+    sum_sq: f64,
+    /// Sum of the matched points' ranges (the lever arm the rotation columns are scaled by).
+    sum_range: f64,
+}
+
+impl Planes {
+    fn new(points: usize, neighbours: usize) -> Self {
+        Self {
+            of_point: Vec::with_capacity(points),
+            nn: Vec::with_capacity(neighbours),
+            nbrs: Vec::with_capacity(neighbours),
+        }
+    }
+
+    /// Associates every point with its plane at the estimate `x` (searching again when
+    /// `search`) and sums the rows of the residuals that pass the gate.
+    fn normal_equations(
+        &mut self,
+        points: &[Vector3<f64>],
+        x: &State,
+        map: &VoxelMap,
+        cfg: &UpdateConfig,
+        search: bool,
+    ) -> NormalEquations {
+        let mut eq =
+            NormalEquations { hth: Matrix6::zeros(), htz: Vector6::zeros(), n_used: 0, sum_sq: 0.0, sum_range: 0.0 };
+        if search {
+            self.of_point.clear();
+        }
+        for (i, p) in points.iter().enumerate() {
+            let q = x.rot_imu_lidar * p + x.pos_imu_lidar;
+            let w = x.rot * q + x.pos;
+            if search {
+                let plane = self.fit_at(&w, map, cfg);
+                self.of_point.push(plane);
+            }
+            let Some(pl) = self.of_point.get(i).copied().flatten() else { continue };
+            let r = pl.normal.dot(&w) + pl.offset;
+            // FAST-LIO's gate: farther points may sit farther from their plane.
+            if r.abs() * 9.0 > p.norm().sqrt() {
+                continue;
+            }
+            let j_rot = q.cross(&(x.rot.inverse() * pl.normal));
+            let row = Vector6::new(j_rot.x, j_rot.y, j_rot.z, pl.normal.x, pl.normal.y, pl.normal.z);
+            eq.hth += row * row.transpose();
+            eq.htz += row * r;
+            eq.n_used += 1;
+            eq.sum_sq += r * r;
+            eq.sum_range += q.norm();
+        }
+        eq
+    }
+
+    /// The plane of the map's nearest points around `w`; None with fewer than `neighbours`
+    /// within reach or no plane among them.
+    fn fit_at(&mut self, w: &Vector3<f64>, map: &VoxelMap, cfg: &UpdateConfig) -> Option<Plane> {
+        map.nearest(w, cfg.neighbours, cfg.max_neighbour_dist_m, &mut self.nn);
+        if self.nn.len() < cfg.neighbours {
+            return None;
+        }
+        self.nbrs.clear();
+        self.nbrs.extend(self.nn.iter().map(|(_, v)| *v));
+        plane::fit(&self.nbrs, cfg.max_plane_dev_m)
+    }
+}
+
+impl NormalEquations {
+    /// Reports the degeneracy index, RMS and weak directions (see the module's notes) and
+    /// drops the information along the weak ones, so that they take no update.
+    fn condition(&mut self, cfg: &UpdateConfig, it: usize, report: &mut UpdateReport) {
+        let n = self.n_used as f64;
+        let l = (self.sum_range / n).max(1e-3);
+        let mut s = Vector6::repeat(1.0);
+        s.fixed_rows_mut::<3>(0).fill(1.0 / l);
+        let scaled = Matrix6::from_diagonal(&s) * self.hth * Matrix6::from_diagonal(&s) / n;
+        let eigen = SymmetricEigen::new(scaled);
+        report.degeneracy_index = eigen.eigenvalues.min();
+        report.rms_m = (self.sum_sq / n).sqrt();
+        report.weak_directions = eigen.eigenvalues.iter().filter(|&&l| l < cfg.min_direction_info).count();
+        if report.weak_directions > 0 && tracing::enabled!(tracing::Level::TRACE) {
+            trace_weak_directions(&eigen, cfg, it);
+        }
+        if report.weak_directions > 0 {
+            self.keep_strong_directions(&eigen, &s, cfg);
+        }
+    }
+
+    /// Keeps only the information along well-constrained directions (projected in the
+    /// unit-free coordinates `s` where the eigenvalues were taken, then scaled back).
+    fn keep_strong_directions(&mut self, eigen: &SymmetricEigen<f64, U6>, s: &Vector6<f64>, cfg: &UpdateConfig) {
+        let mut keep = Matrix6::<f64>::zeros();
+        for (i, l) in eigen.eigenvalues.iter().enumerate() {
+            if *l >= cfg.min_direction_info {
+                let v = eigen.eigenvectors.column(i);
+                keep += v * v.transpose();
+            }
+        }
+        let s_inv = Matrix6::from_diagonal(&s.map(|v| 1.0 / v));
+        let to = s_inv * keep * Matrix6::from_diagonal(s);
+        self.hth = to * self.hth * to.transpose();
+        self.htz = to * self.htz;
+    }
+}
+
+fn trace_weak_directions(eigen: &SymmetricEigen<f64, U6>, cfg: &UpdateConfig, it: usize) {
+    for (l, v) in eigen.eigenvalues.iter().zip(eigen.eigenvectors.column_iter()) {
+        if *l < cfg.min_direction_info {
+            let v: Vec<String> = v.iter().map(|c| format!("{c:+.2}")).collect();
+            tracing::trace!(it, info = l, direction = v.join(" "), "left to the IMU (rx ry rz x y z, unit-free)");
+        }
+    }
+}
+
+/// The step of the MAP problem in information form (the module's equation) from the estimate
+/// `x`, and the posterior covariance; None when the information cannot be inverted.
+fn solve(p_inv: &Cov, x: &State, prior: &State, eq: &NormalEquations, cfg: &UpdateConfig) -> Option<(ErrVec, Cov)> {
+    let mut info = *p_inv;
+    let mut ff = info.fixed_view_mut::<6, 6>(0, 0);
+    ff += eq.hth / cfg.residual_var_m2;
+    let e = x.boxminus(prior);
+    let mut rhs = -(*p_inv * e);
+    let mut top = rhs.fixed_rows_mut::<6>(0);
+    top -= eq.htz / cfg.residual_var_m2;
+    let info_inv = info.try_inverse()?;
+    let dx: ErrVec = info_inv * rhs;
+    Some((dx, info_inv))
 }
 
 #[cfg(test)]
