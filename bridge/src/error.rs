@@ -14,6 +14,8 @@ pub enum BridgeError {
     Recording { path: PathBuf, source: starc_pipeline::PipelineError },
     #[error("{topic} message {sequence}: {source}")]
     Message { topic: String, sequence: u32, source: starc_pipeline::PipelineError },
+    #[error("wheel log {path}: {reason}")]
+    WheelLog { path: PathBuf, reason: String },
     #[error("external IMU {path}: {reason}")]
     ExternalImu { path: PathBuf, reason: String },
 }

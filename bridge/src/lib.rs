@@ -8,6 +8,7 @@
 //!   IMU packet or live reading to an [`ImuSample`](starc_pipeline::lio::ImuSample);
 //! - [`external_imu`]: an external IMU's file (MicroStrain MIP bytes or CSV);
 //! - [`recorded`]: scans and IMU samples read back from a node's MCAP recording;
+//! - [`wheels`]: the base's wheel feedback (a `candump -l` log) as the body's twist;
 //! - [`inputs`]: both devices' inputs of a mission in time order, from a capture or recordings.
 
 pub mod error;
@@ -15,6 +16,7 @@ pub mod external_imu;
 pub mod inputs;
 pub mod livox;
 pub mod recorded;
+pub mod wheels;
 
 pub use error::BridgeError;
 pub use inputs::{decode_avia, from_capture, from_recordings, is_mcap, AviaInputs, Inputs};

@@ -52,6 +52,9 @@ pub struct Args {
     /// swinging shins costs and gains on every overlay metric. Offline only.
     #[arg(long)]
     walker_min_height_m: Option<f64>,
+    /// Fuse the base's wheel odometry into the robot's LIO (offline).
+    #[arg(long)]
+    wheels: bool,
     /// Buildings run at once (default: one per core offline, one live).
     #[arg(long)]
     jobs: Option<usize>,
@@ -217,7 +220,7 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
     run_sim(&g.scenario, &g.text, &opts, &mut |_, _| {}).with_context(|| format!("simulating {}", dir.display()))?;
     let mission_dir = dir.join("mission");
     if args.offline {
-        mission_offline(&dir, &mission_dir, args)?;
+        mission_offline(&dir, g.scenario.robot.get_ref(), &mission_dir, args)?;
     } else {
         mission_live(&dir, &mission_dir, args)?;
     }
@@ -231,9 +234,12 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
     Ok(Row::new(seed, g.family, g.people, duration_s.unwrap_or(g.scenario.duration_s), flatten(&report)))
 }
 
-fn mission_offline(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
+fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Path, args: &Args) -> anyhow::Result<()> {
     let truth = starc_eval::Truth::load(dir)?;
-    let inputs = starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
+    let mut inputs = starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
+    if args.wheels {
+        inputs = starc_bridge::wheels::with_wheels(inputs, super::sim::wheel_samples(dir, robot)?);
+    }
     let (start, start_gate_m) = match args.hint {
         Hint::None => (Start::At(Isometry3::identity()), f64::INFINITY),
         Hint::Truth => (Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 }, 2.0),

@@ -143,3 +143,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// The simulated base's wheel odometry from a run's `robot_can.log`, decoded with the
+/// scenario's wheel layout and motor controllers (its log is on the Avias' PTP clock).
+pub fn wheel_samples(
+    dir: &std::path::Path,
+    robot: &starc_hil::sim::scenario::Robot,
+) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
+    use starc_bridge::wheels::{read_wheel_log, MotorFeedback};
+    use starc_hil::sim::scenario::MotorProtocol;
+    let motors = match robot.motors {
+        MotorProtocol::C620 => MotorFeedback::C620,
+        MotorProtocol::Cia402 => MotorFeedback::Cia402,
+    };
+    let kinematics = starc_hil::sim::wheels::default_geometry(robot.wheels);
+    Ok(read_wheel_log(&dir.join("robot_can.log"), &kinematics, motors, 0)?)
+}

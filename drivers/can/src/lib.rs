@@ -11,6 +11,7 @@
 
 pub mod any;
 pub mod bus;
+pub mod candump;
 pub mod error;
 pub mod frame;
 pub mod slcan;

@@ -6,6 +6,7 @@ use super::init::{DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::odometry::LioConfig;
 use super::propagate::ImuNoise;
 use super::update::UpdateConfig;
+use super::wheel::WheelFusion;
 use crate::PipelineError;
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -19,6 +20,7 @@ pub struct LioFile {
     pub update: UpdateSection,
     pub map: MapSection,
     pub health: HealthConfig,
+    pub wheels: WheelsSection,
 }
 
 /// Which IMU drives the filter and how its samples reach the LiDAR's clock.
@@ -79,6 +81,72 @@ impl Default for ExtrinsicsSection {
     /// (0.04165, 0.02326, -0.0284) m in the IMU frame (Livox's published offset).
     fn default() -> Self {
         Self { translation_m: [0.04165, 0.02326, -0.0284], rotation_rpy_deg: [0.0; 3] }
+    }
+}
+
+/// The base's wheel odometry as a measurement (used only when wheel samples come: the robot).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WheelsSection {
+    /// The base's frame (x forward, y left, z up, at its centre on the floor) in the IMU's frame.
+    pub translation_m: [f64; 3],
+    pub rotation_rpy_deg: [f64; 3],
+    /// Planar velocity noise, 1 sigma: `sigma_m_s + sigma_rel * speed` (slip grows with speed).
+    pub sigma_m_s: f64,
+    pub sigma_rel: f64,
+    /// Noise of "the base does not move along its own z".
+    pub sigma_vz_m_s: f64,
+    /// Wheel samples this long before a scan's end are averaged into its measurement.
+    pub window_ms: f64,
+    /// Huber threshold (normalised innovation) per axis, and the chi-square gate (3 dof) past
+    /// which a measurement is not used: slip, a wheel in the air.
+    pub huber_k: f64,
+    pub gate_chi2: f64,
+}
+
+impl Default for WheelsSection {
+    fn default() -> Self {
+        let w = WheelFusion::default();
+        Self {
+            translation_m: w.pos_imu_base.into(),
+            rotation_rpy_deg: [0.0; 3],
+            sigma_m_s: w.sigma_m_s,
+            sigma_rel: w.sigma_rel,
+            sigma_vz_m_s: w.sigma_vz_m_s,
+            window_ms: w.window_ns as f64 * 1e-6,
+            huber_k: w.huber_k,
+            gate_chi2: w.gate_chi2,
+        }
+    }
+}
+
+impl WheelsSection {
+    fn to_fusion(&self) -> Result<WheelFusion, String> {
+        for (name, v) in [
+            ("wheels.sigma_m_s", self.sigma_m_s),
+            ("wheels.sigma_vz_m_s", self.sigma_vz_m_s),
+            ("wheels.window_ms", self.window_ms),
+            ("wheels.huber_k", self.huber_k),
+            ("wheels.gate_chi2", self.gate_chi2),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a positive number, not {v}"));
+            }
+        }
+        if !(self.sigma_rel.is_finite() && self.sigma_rel >= 0.0) {
+            return Err(format!("wheels.sigma_rel must be 0 or more, not {}", self.sigma_rel));
+        }
+        let [r, p, y] = self.rotation_rpy_deg.map(f64::to_radians);
+        Ok(WheelFusion {
+            rot_imu_base: Rotation3::from_euler_angles(r, p, y),
+            pos_imu_base: Vector3::from(self.translation_m),
+            sigma_m_s: self.sigma_m_s,
+            sigma_rel: self.sigma_rel,
+            sigma_vz_m_s: self.sigma_vz_m_s,
+            window_ns: (self.window_ms * 1e6) as u64,
+            huber_k: self.huber_k,
+            gate_chi2: self.gate_chi2,
+        })
     }
 }
 
@@ -223,6 +291,7 @@ impl LioFile {
             map_radius_m: self.map.radius_m,
             health: self.health.clone(),
             stopwatch: crate::timing::Stopwatch::Wall,
+            wheel: self.wheels.to_fusion().map_err(bad)?,
         })
     }
 }

@@ -19,6 +19,7 @@ mod so3;
 mod state;
 mod types;
 mod update;
+mod wheel;
 
 pub use config::{ExtrinsicsSection, ImuSection, ImuSource, LioFile, MapSection, ScanSection, UpdateSection};
 pub use health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
@@ -30,3 +31,4 @@ pub use propagate::ImuNoise;
 pub use state::State;
 pub use types::{ImuSample, LioScan, TimedPoint};
 pub use update::{UpdateConfig, UpdateReport};
+pub use wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};

@@ -8,6 +8,7 @@ use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::types::{ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
+use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
 use crate::timing::Stopwatch;
 use crate::voxel_hash::voxel_downsample;
 use nalgebra::{Isometry3, Rotation3, Vector3};
@@ -37,6 +38,8 @@ pub struct LioConfig {
     pub health: HealthConfig,
     /// The clock of `ScanOutput::elapsed_us`.
     pub stopwatch: Stopwatch,
+    /// The base's wheel odometry, when samples come ([`Lio::push_wheel`]).
+    pub wheel: WheelFusion,
 }
 
 impl Default for LioConfig {
@@ -59,6 +62,7 @@ impl Default for LioConfig {
             map_radius_m: 100.0,
             health: HealthConfig::default(),
             stopwatch: Stopwatch::Wall,
+            wheel: WheelFusion::default(),
         }
     }
 }
@@ -85,6 +89,8 @@ pub struct ScanOutput {
     pub points_in: usize,
     pub points_used: usize,
     pub map_points: usize,
+    /// Whether the wheels' twist at the scan's end was used.
+    pub wheel: WheelUse,
     /// Wall time spent on the scan (propagation to map insertion).
     pub elapsed_us: u64,
 }
@@ -110,6 +116,8 @@ pub struct Lio {
     scans_done: u64,
     knots: Vec<Knot>,
     deskewed: Vec<Vector3<f64>>,
+    /// Wheel samples not yet older than the newest scan's window.
+    wheels: VecDeque<WheelSample>,
 }
 
 impl Lio {
@@ -142,6 +150,7 @@ impl Lio {
             scans_done: 0,
             knots: Vec::new(),
             deskewed: Vec::new(),
+            wheels: VecDeque::new(),
             cfg,
         }
     }
@@ -181,6 +190,13 @@ impl Lio {
         }
         self.imu.push_back(s);
         self.drain(out);
+    }
+
+    /// Feeds one wheel sample (in time order, before the scans that end after it).
+    pub fn push_wheel(&mut self, s: WheelSample) {
+        if s.vx_m_s.is_finite() && s.vy_m_s.is_finite() && s.wz_rad_s.is_finite() {
+            self.wheels.push_back(s);
+        }
     }
 
     /// Feeds one scan; it is processed once the IMU has passed its end. A shared scan is kept
@@ -260,6 +276,7 @@ impl Lio {
         self.knots.clear();
         self.propagate_to(scan.end_ns);
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
+        let wheel = self.wheel_step(scan.end_ns);
         let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
         let mut used =
             voxel_downsample(self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq), self.cfg.scan_voxel_m);
@@ -330,8 +347,22 @@ impl Lio {
             points_in: scan.points.len(),
             points_used: used.len(),
             map_points: self.map.len(),
+            wheel,
             elapsed_us: started.us(),
         }
+    }
+
+    /// The wheels' mean twist over the window before `end_ns` into the state (after the
+    /// deskew, which used the state the IMU alone gave, and before the scan's update, whose
+    /// prior then holds it); older samples are dropped.
+    fn wheel_step(&mut self, end_ns: u64) -> WheelUse {
+        let window_ns = self.cfg.wheel.window_ns;
+        let twist = mean_twist(self.wheels.iter().copied(), end_ns, window_ns);
+        while self.wheels.front().is_some_and(|s| s.t_ns + window_ns <= end_ns) {
+            self.wheels.pop_front();
+        }
+        let (Some(twist), Some(held)) = (twist, self.held) else { return WheelUse::None };
+        wheel_update(&mut self.state, &mut self.cov, &held.gyro_rad_s, &twist, &self.cfg.wheel)
     }
 
     /// A lost filter no longer trusts its position, velocity or heading much: widen them so the

@@ -1,6 +1,6 @@
 //! What a two-device mission takes in: each device's IMU samples and scans, tagged by side.
 
-use crate::lio::{ImuSample, LioScan};
+use crate::lio::{ImuSample, LioScan, WheelSample};
 
 /// Which device an input comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -12,6 +12,8 @@ pub enum Side {
 pub enum MissionInput {
     Imu(Side, ImuSample),
     Scan(Side, LioScan),
+    /// The base's wheel odometry (the robot's only).
+    Wheel(Side, WheelSample),
 }
 
 impl MissionInput {
@@ -20,6 +22,7 @@ impl MissionInput {
         match self {
             MissionInput::Imu(_, s) => s.t_ns,
             MissionInput::Scan(_, s) => s.end_ns,
+            MissionInput::Wheel(_, s) => s.t_ns,
         }
     }
 }

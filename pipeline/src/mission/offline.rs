@@ -44,6 +44,9 @@ impl OfflineMission {
             MissionInput::Imu(Side::Rig, s) => self.rig.push_imu(s, &mut self.rig_outs),
             MissionInput::Scan(Side::Robot, s) => self.robot.push_scan(s, &mut self.robot_steps),
             MissionInput::Scan(Side::Rig, s) => self.rig.push_scan(s, &mut self.rig_outs),
+            MissionInput::Wheel(Side::Robot, w) => self.robot.push_wheel(w),
+            // A handheld or helmet rig has no wheels.
+            MissionInput::Wheel(Side::Rig, _) => {}
         }
         for step in self.robot_steps.drain(..) {
             let o = &step.output;

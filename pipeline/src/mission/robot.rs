@@ -9,7 +9,7 @@ use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{
     DetectConfig, DetectWindow, Detection, Detector, FloorModel, GeometricDetector, PersonPose, WindowPoint,
 };
-use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, WheelFusion, WheelSample};
 use crate::timing::Stopwatch;
 use crate::PipelineError;
 use nalgebra::Vector3;
@@ -54,12 +54,17 @@ pub struct RobotCoreConfig {
 /// more than a walker's helmet can be (the LIO's generic 0.1 lets a scan that sees little but new
 /// geometry, in a turn, tilt it by up to a degree; 0.005 is still 20 times the BMI088's density).
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
+/// The base's ground point in the Avia IMU's frame: the Avia 0.45 m above the floor, level, over
+/// the base's centre (the Avia's IMU sits at (0.04165, 0.02326, -0.0284) m in its LiDAR's
+/// frame). Only the horizontal part matters much: it turns the base's yaw rate into velocity.
+pub const ROBOT_IMU_T_BASE_M: [f64; 3] = [0.04165, 0.02326, -0.4784];
 
 impl RobotCoreConfig {
     /// The robot's LIO settings: the defaults with [`ROBOT_GYRO_NOISE_RAD_S`].
     pub fn robot_lio() -> LioConfig {
         LioConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
+            wheel: WheelFusion { pos_imu_base: ROBOT_IMU_T_BASE_M.into(), ..WheelFusion::default() },
             ..LioConfig::default()
         }
     }
@@ -157,6 +162,11 @@ impl RobotCore {
     pub fn push_imu(&mut self, sample: ImuSample, out: &mut Vec<RobotStep>) {
         self.lio.push_imu(sample, &mut self.outs);
         self.drain(out);
+    }
+
+    /// The base's wheel odometry, in time order before the scans that end after it.
+    pub fn push_wheel(&mut self, sample: WheelSample) {
+        self.lio.push_wheel(sample);
     }
 
     pub fn push_scan(&mut self, scan: LioScan, out: &mut Vec<RobotStep>) {
@@ -287,7 +297,9 @@ mod tests {
         assert_eq!(RobotCoreConfig::default().lio.noise.gyro_rad_s, ROBOT_GYRO_NOISE_RAD_S);
         // Everything else is the LIO's generic default.
         let generic = LioConfig::default();
-        assert_eq!(LioConfig { noise: generic.noise, ..RobotCoreConfig::robot_lio() }, generic);
+        let robot = RobotCoreConfig::robot_lio();
+        assert_eq!(robot.wheel.pos_imu_base, nalgebra::Vector3::from(ROBOT_IMU_T_BASE_M));
+        assert_eq!(LioConfig { noise: generic.noise, wheel: generic.wheel.clone(), ..robot }, generic);
     }
 
     fn point(z_m: f32) -> WindowPoint {
