@@ -52,9 +52,10 @@ pub struct Args {
     /// swinging shins costs and gains on every overlay metric. Offline only.
     #[arg(long)]
     walker_min_height_m: Option<f64>,
-    /// Fuse the base's wheel odometry into the robot's LIO (offline).
+    /// Leave the base's wheel odometry out of the robot's LIO (offline), to measure what it
+    /// brings.
     #[arg(long)]
-    wheels: bool,
+    no_wheels: bool,
     /// Buildings run at once (default: one per core offline, one live).
     #[arg(long)]
     jobs: Option<usize>,
@@ -237,7 +238,7 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<Row> {
 fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Path, args: &Args) -> anyhow::Result<()> {
     let truth = starc_eval::Truth::load(dir)?;
     let mut inputs = starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
-    if args.wheels {
+    if !args.no_wheels {
         inputs = starc_bridge::wheels::with_wheels(inputs, super::sim::wheel_samples(dir, robot)?);
     }
     let (start, start_gate_m) = match args.hint {

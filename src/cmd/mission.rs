@@ -45,11 +45,17 @@ pub struct Args {
     /// `walker_min_height_m`, 0.8 by default; 0 draws their legs too).
     #[arg(long)]
     pub walker_min_height_m: Option<f64>,
+    /// Leave the base's wheel odometry (the run's robot_can.log) out of the robot's LIO.
+    #[arg(long)]
+    pub no_wheels: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let truth = Truth::load(&args.dir)?;
-    let inputs = starc_bridge::from_capture(&args.dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
+    let mut inputs = starc_bridge::from_capture(&args.dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
+    if !args.no_wheels {
+        inputs = starc_bridge::wheels::with_wheels(inputs, super::sim::run_wheel_samples(&args.dir)?);
+    }
     let run = Offline {
         out: args.out.clone().unwrap_or_else(|| args.dir.join("mission")),
         frames_every: args.frames_every,

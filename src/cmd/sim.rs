@@ -130,6 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
             walker_min_height_m: None,
+            no_wheels: false,
         })?;
     } else if !args.sensors_only && !args.no_camera {
         let opts = super::sim_live::LiveOptions {
@@ -142,6 +143,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         super::sim_live::run(&args.out, &opts)?;
     }
     Ok(())
+}
+
+/// The wheel odometry of a `starc sim` run's directory, decoded with the base its
+/// scenario.toml describes.
+pub fn run_wheel_samples(dir: &std::path::Path) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
+    let path = dir.join("scenario.toml");
+    let (scenario, _) = Scenario::load(&path.to_string_lossy())?;
+    wheel_samples(dir, scenario.robot.get_ref())
 }
 
 /// The simulated base's wheel odometry from a run's `robot_can.log`, decoded with the

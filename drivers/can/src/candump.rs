@@ -21,6 +21,9 @@ pub fn parse_line(line: &str) -> Result<LoggedFrame> {
     let t_ns = stamp_ns(stamp).ok_or_else(|| bad("time is not SECONDS.MICROS"))?;
     let (interface, frame) = rest.split_once(' ').ok_or_else(|| bad("no frame after the interface"))?;
     let (id, data) = frame.split_once('#').ok_or_else(|| bad("no '#' in the frame"))?;
+    if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return Err(bad("id is not hexadecimal"));
+    }
     let raw = u32::from_str_radix(id, 16).map_err(|_| bad("id is not hexadecimal"))?;
     let id = match id.len() {
         3 => CanId::standard(u16::try_from(raw).map_err(|_| bad("standard id too large"))?)?,
@@ -28,9 +31,7 @@ pub fn parse_line(line: &str) -> Result<LoggedFrame> {
         _ => return Err(bad("id is neither 3 (standard) nor 8 (extended) hex digits")),
     };
     let frame = match data.strip_prefix('R') {
-        Some(dlc) => {
-            CanFrame::remote(id, if dlc.is_empty() { 0 } else { dlc.parse().map_err(|_| bad("bad remote DLC"))? })?
-        }
+        Some(dlc) => CanFrame::remote(id, remote_dlc(dlc).ok_or_else(|| bad("remote DLC is not one digit 0-8"))?)?,
         None => CanFrame::new(id, &hex_bytes(data).ok_or_else(|| bad("data is not pairs of hex digits"))?)?,
     };
     Ok(LoggedFrame { t_ns, interface: interface.to_string(), frame })
@@ -45,8 +46,17 @@ fn stamp_ns(s: &str) -> Option<u64> {
     secs.parse::<u64>().ok()?.checked_mul(1_000_000_000)?.checked_add(micros.parse::<u64>().ok()? * 1000)
 }
 
+/// `R` alone is DLC 0; otherwise one digit.
+fn remote_dlc(s: &str) -> Option<u8> {
+    match s.as_bytes() {
+        [] => Some(0),
+        [d @ b'0'..=b'8'] => Some(d - b'0'),
+        _ => None,
+    }
+}
+
 fn hex_bytes(s: &str) -> Option<Vec<u8>> {
-    if !s.len().is_multiple_of(2) || s.len() > 16 {
+    if !s.len().is_multiple_of(2) || s.len() > 16 || !s.bytes().all(|b| b.is_ascii_hexdigit()) {
         return None;
     }
     (0..s.len() / 2).map(|i| s.get(2 * i..2 * i + 2).and_then(|h| u8::from_str_radix(h, 16).ok())).collect()
@@ -84,6 +94,9 @@ mod tests {
             "(1.000000) can0 800#00",
             "(1.000000) can0 201#R9",
             "(99999999999999999999.000000) can0 201#00",
+            "(1.000000) can0 +1F#00",
+            "(1.000000) can0 201#+1",
+            "(1.000000) can0 201#R08",
         ] {
             assert!(parse_line(line).is_err(), "{line:?} was taken");
         }
