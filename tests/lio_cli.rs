@@ -50,6 +50,45 @@ fn starc_lio_writes_trajectories_maps_and_timing_that_evo_scores() {
         assert!(d["scans_out"].as_u64().unwrap() > 50, "{d}");
         assert!(d["time_per_scan_ms_median"].as_f64().unwrap() > 0.0, "{d}");
     }
+    // With the base's wheel feedback (the simulator's robot_can.log and its base: three omni
+    // wheels of 0.05 m on a 0.2 m arm, C620 ESCs 1-3), the robot's LIO uses it on nearly every scan.
+    let base = dir.path().join("base.toml");
+    let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/base.toml")).unwrap();
+    std::fs::write(
+        &base,
+        shipped
+            .replace("wheel_radius_m = 0.076", "wheel_radius_m = 0.05")
+            .replace("center_to_wheel_m = 0.22", "center_to_wheel_m = 0.2"),
+    )
+    .unwrap();
+    let wheeled = dir.path().join("lio_wheels");
+    ok(starc()
+        .arg("lio")
+        .arg(sim.join("avia.pcap"))
+        .args(["--device", "192.168.1.101", "--wheels"])
+        .arg(sim.join("robot_can.log"))
+        .arg("--base-config")
+        .arg(&base)
+        .arg("--out")
+        .arg(&wheeled)
+        .output()
+        .unwrap());
+    let table = std::fs::read_to_string(wheeled.join("192.168.1.101_scans.csv")).unwrap();
+    let rows: Vec<&str> = table.lines().skip(1).collect();
+    let applied = rows.iter().filter(|r| r.ends_with(",applied")).count();
+    assert!(rows.len() > 50 && applied * 10 >= rows.len() * 9, "{applied} of {} scans used the wheels", rows.len());
+    // Without --base-config the wheels cannot be read: a clear error.
+    let refused = starc()
+        .arg("lio")
+        .arg(sim.join("avia.pcap"))
+        .arg("--wheels")
+        .arg(sim.join("robot_can.log"))
+        .arg("--out")
+        .arg(dir.path().join("x"))
+        .output()
+        .unwrap();
+    assert!(!refused.status.success() && String::from_utf8_lossy(&refused.stderr).contains("base-config"));
+
     // The map reads back with our own reader.
     let map = starc_pipeline::cloud::read(&out.join("192.168.1.101_map.pcd")).unwrap();
     assert!(map.len() > 1000, "{} map points", map.len());

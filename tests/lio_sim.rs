@@ -57,6 +57,7 @@ fn external_imu(dir: &Path) -> Vec<ImuSample> {
             let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
             ImuSample {
                 t_ns: ((v[0] * 1e6).round() as u64) * 1000,
+                clock: starc_time::Clock::Ptp,
                 gyro_rad_s: Vector3::new(v[1], v[2], v[3]),
                 acc_m_s2: Vector3::new(v[4], v[5], v[6]),
             }

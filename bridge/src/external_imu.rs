@@ -16,7 +16,9 @@ const UNIX_MINUS_GPS_NS: i64 = (315_964_800 - 18) * 1_000_000_000;
 /// The MIP sync bytes a MicroStrain stream starts with.
 const MIP_SYNC: [u8; 2] = [0x75, 0x65];
 
-/// An external IMU's samples, in time order, with `offset_ns` added to their stamps.
+/// An external IMU's samples, in time order, with `offset_ns` added to their stamps. They are
+/// taken as on the LiDAR's PTP clock: a MIP device's GPS time from a PTP-disciplined receiver, or
+/// the simulator's CSV (whose times are the Avias' PTP times).
 ///
 /// A file starting with the MIP sync bytes is decoded as a MicroStrain MIP stream; its GPS time
 /// field (Unix time + 18 s leap seconds, as a PTP-disciplined device reports it) gives the stamp.
@@ -54,7 +56,12 @@ fn mip(bytes: &[u8]) -> Vec<ImuSample> {
             untimed += 1;
             continue;
         };
-        let sample = ImuSample { t_ns, gyro_rad_s: Vector3::from(s.gyro_rad_s), acc_m_s2: Vector3::from(s.accel_m_s2) };
+        let sample = ImuSample {
+            t_ns,
+            clock: Clock::Ptp,
+            gyro_rad_s: Vector3::from(s.gyro_rad_s),
+            acc_m_s2: Vector3::from(s.accel_m_s2),
+        };
         // A NaN or infinity would poison the filter's state for good: such a sample is dropped.
         if sample.gyro_rad_s.iter().chain(sample.acc_m_s2.iter()).all(|x| x.is_finite()) {
             out.push(sample);
@@ -102,7 +109,7 @@ fn csv_line(line: &str) -> Result<ImuSample, String> {
     }
     // Seconds with 6 decimals: round to the microsecond they were written with.
     let t_ns = ((t * 1e6).round() as u64).saturating_mul(1000);
-    Ok(ImuSample { t_ns, gyro_rad_s: Vector3::new(gx, gy, gz), acc_m_s2: Vector3::new(ax, ay, az) })
+    Ok(ImuSample { t_ns, clock: Clock::Ptp, gyro_rad_s: Vector3::new(gx, gy, gz), acc_m_s2: Vector3::new(ax, ay, az) })
 }
 
 #[cfg(test)]

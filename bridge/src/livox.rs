@@ -14,6 +14,7 @@ pub fn lio_scan(scan: &Scan) -> LioScan {
     LioScan {
         start_ns,
         end_ns: scan.end().ns,
+        clock: scan.start.clock,
         points: scan
             .points
             .iter()
@@ -50,6 +51,7 @@ pub fn packet_imu(packet: &DataPacket<'_>) -> Option<ImuSample> {
     let s = packet.imu()?;
     Some(ImuSample {
         t_ns: packet.header.timestamp.ns,
+        clock: packet.header.timestamp.clock,
         gyro_rad_s: Vector3::from(s.gyro_rad_s.map(f64::from)),
         acc_m_s2: Vector3::from(s.acc_m_s2().map(f64::from)),
     })
@@ -59,6 +61,7 @@ pub fn packet_imu(packet: &DataPacket<'_>) -> Option<ImuSample> {
 pub fn reading_imu(r: &ImuReading) -> ImuSample {
     ImuSample {
         t_ns: r.device_time.ns,
+        clock: r.device_time.clock,
         gyro_rad_s: Vector3::from(r.sample.gyro_rad_s.map(f64::from)),
         acc_m_s2: Vector3::from(r.sample.acc_m_s2().map(f64::from)),
     }

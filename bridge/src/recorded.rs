@@ -35,13 +35,17 @@ pub fn recorded(m: &RecordedMessage, period_ns: u64) -> Result<Option<Recorded>,
                 .collect();
             let last = points.iter().map(|p| p.t_ns).max().unwrap_or(start.ns);
             let end_ns = (start.ns + period_ns).max(last + 1);
-            Some(Recorded::Scan(device, LioScan { start_ns: start.ns, end_ns, points }))
+            Some(Recorded::Scan(device, LioScan { start_ns: start.ns, end_ns, clock: start.clock, points }))
         }
         Decoded::Imu(msg) => {
             let Some(t_ns) = msg.header.stamp.to_ns() else { return Ok(None) };
             let (g, a) = (&msg.angular_velocity, &msg.linear_acceleration);
-            let sample =
-                ImuSample { t_ns, gyro_rad_s: Vector3::new(g.x, g.y, g.z), acc_m_s2: Vector3::new(a.x, a.y, a.z) };
+            let sample = ImuSample {
+                t_ns,
+                clock: Clock::Ptp,
+                gyro_rad_s: Vector3::new(g.x, g.y, g.z),
+                acc_m_s2: Vector3::new(a.x, a.y, a.z),
+            };
             Some(Recorded::Imu(device, sample))
         }
         _ => None,

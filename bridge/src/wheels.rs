@@ -6,10 +6,11 @@ use crate::{BridgeError, Inputs};
 use starc_base::c620::frame::M3508_GEAR_RATIO;
 use starc_base::c620::Feedback;
 use starc_base::cia402::{Cia402Config, VelocityStatus};
+use starc_base::config::{BaseConfig, Protocol};
 use starc_base::kinematics::{Kinematics, KinematicsConfig};
 use starc_can::candump::parse_line;
 use starc_can::CanFrame;
-use starc_pipeline::lio::WheelSample;
+use starc_pipeline::lio::{Clock, WheelSample};
 use starc_pipeline::mission::{MissionInput, Side};
 use std::path::Path;
 
@@ -22,26 +23,89 @@ pub enum MotorFeedback {
     Cia402,
 }
 
+/// How a base's feedback frames map to its wheels: the base driver's own settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WheelFeedback {
+    pub kinematics: KinematicsConfig,
+    pub motors: MotorFeedback,
+    /// Per wheel, in kinematics order: its ESC or CANopen node id, and whether its motor turns
+    /// the other way for a positive wheel rate.
+    pub wheels: Vec<(u8, bool)>,
+    /// C620: rotor turns per wheel turn.
+    pub gear_ratio: f64,
+    /// CiA 402: drive velocity units per wheel rad/s.
+    pub units_per_rad_s: f64,
+}
+
+impl WheelFeedback {
+    /// The base as its driver's config file (config/base.toml) describes it.
+    pub fn from_base(cfg: &BaseConfig) -> Self {
+        Self {
+            kinematics: cfg.kinematics.clone(),
+            motors: match cfg.motors.protocol {
+                Protocol::C620 => MotorFeedback::C620,
+                Protocol::Cia402 => MotorFeedback::Cia402,
+            },
+            wheels: cfg.motors.wheels.iter().map(|w| (w.id, w.invert)).collect(),
+            gear_ratio: cfg.motors.c620.gear_ratio,
+            units_per_rad_s: cfg.motors.cia402.units_per_rad_s,
+        }
+    }
+
+    /// Wheels 1..=n in kinematics order, none inverted, an M3508 gearbox or the drives' default
+    /// units (the simulator's base).
+    pub fn plain(kinematics: KinematicsConfig, motors: MotorFeedback, wheel_count: u8) -> Self {
+        Self {
+            kinematics,
+            motors,
+            wheels: (1..=wheel_count).map(|id| (id, false)).collect(),
+            gear_ratio: M3508_GEAR_RATIO,
+            units_per_rad_s: Cia402Config::default().units_per_rad_s,
+        }
+    }
+
+    /// Wheel index and wheel rate of one feedback frame, if it is one of this base's.
+    fn wheel_rate(&self, frame: &CanFrame) -> Option<(usize, f64)> {
+        let (id, rad_s) = match self.motors {
+            MotorFeedback::C620 => {
+                let f = Feedback::parse(frame).ok()?;
+                (f.esc, f.output_rad_s(self.gear_ratio))
+            }
+            MotorFeedback::Cia402 => {
+                let (node, v) = VelocityStatus::parse(frame).ok()?;
+                (node, f64::from(v.actual_velocity) / self.units_per_rad_s)
+            }
+        };
+        let wheel = self.wheels.iter().position(|(w, _)| *w == id)?;
+        let invert = self.wheels.get(wheel).is_some_and(|(_, i)| *i);
+        Some((wheel, if invert { -rad_s } else { rad_s }))
+    }
+}
+
 /// The wheels' twists from a log, one per cycle (stamped by its first frame, moved by
-/// `offset_ns` onto the LiDAR's clock); lines that are not wheel feedback are skipped.
-pub fn read_wheel_log(
-    path: &Path,
-    kinematics: &KinematicsConfig,
-    motors: MotorFeedback,
-    offset_ns: i64,
-) -> Result<Vec<WheelSample>, BridgeError> {
+/// `offset_ns` onto the LiDAR's PTP clock); lines that are not this base's feedback are skipped.
+pub fn read_wheel_log(path: &Path, base: &WheelFeedback, offset_ns: i64) -> Result<Vec<WheelSample>, BridgeError> {
     let text = std::fs::read_to_string(path).map_err(|source| BridgeError::Io { path: path.into(), source })?;
     let bad = |reason: String| BridgeError::WheelLog { path: path.into(), reason };
-    let kin = Kinematics::new(kinematics).map_err(|e| bad(e.to_string()))?;
+    let kin = Kinematics::new(&base.kinematics).map_err(|e| bad(e.to_string()))?;
+    if base.wheels.len() != kin.wheel_count() {
+        return Err(bad(format!("{} wheel ids for {} wheels", base.wheels.len(), kin.wheel_count())));
+    }
     let mut cycle = Cycle::new(kin.wheel_count());
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let logged = parse_line(line).map_err(|e| bad(format!("line {}: {e}", n + 1)))?;
-        let Some((wheel, rad_s)) = wheel_rate(&logged.frame, motors) else { continue };
+        let Some((wheel, rad_s)) = base.wheel_rate(&logged.frame) else { continue };
         if let Some((t_ns, rates)) = cycle.add(logged.t_ns, wheel, rad_s) {
             if let Some(tw) = kin.body_twist(&rates) {
                 let t_ns = t_ns.saturating_add_signed(offset_ns);
-                out.push(WheelSample { t_ns, vx_m_s: tw.vx_m_s, vy_m_s: tw.vy_m_s, wz_rad_s: tw.wz_rad_s });
+                out.push(WheelSample {
+                    t_ns,
+                    clock: Clock::Ptp,
+                    vx_m_s: tw.vx_m_s,
+                    vy_m_s: tw.vy_m_s,
+                    wz_rad_s: tw.wz_rad_s,
+                });
             }
         }
     }
@@ -49,21 +113,6 @@ pub fn read_wheel_log(
         return Err(bad(format!("no complete cycle of {} wheels' feedback", kin.wheel_count())));
     }
     Ok(out)
-}
-
-/// Wheel index (0-based) and output shaft rate of one feedback frame.
-fn wheel_rate(frame: &CanFrame, motors: MotorFeedback) -> Option<(usize, f64)> {
-    match motors {
-        MotorFeedback::C620 => {
-            let f = Feedback::parse(frame).ok()?;
-            Some((usize::from(f.esc).checked_sub(1)?, f.output_rad_s(M3508_GEAR_RATIO)))
-        }
-        MotorFeedback::Cia402 => {
-            let (node, v) = VelocityStatus::parse(frame).ok()?;
-            let rad_s = f64::from(v.actual_velocity) / Cia402Config::default().units_per_rad_s;
-            Some((usize::from(node).checked_sub(1)?, rad_s))
-        }
-    }
 }
 
 /// One cycle's rates, complete once every wheel has reported.
@@ -140,7 +189,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let path = dir.path().join("robot_can.log");
         std::fs::write(&path, log).unwrap_or_else(|e| panic!("{e}"));
-        let got = read_wheel_log(&path, &OMNI3, MotorFeedback::C620, 0).unwrap_or_else(|e| panic!("{e}"));
+        let base = WheelFeedback::plain(OMNI3, MotorFeedback::C620, 3);
+        let got = read_wheel_log(&path, &base, 0).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(got.len(), 3);
         assert_eq!(got[1].t_ns, 1_010_000_000);
         // The C620 reports whole rotor rpm: a few mm/s of quantisation.
@@ -150,9 +200,10 @@ mod tests {
     #[test]
     fn wheels_go_before_the_inputs_they_precede() {
         use starc_pipeline::lio::ImuSample;
-        let still = |t_ns| ImuSample { t_ns, gyro_rad_s: Default::default(), acc_m_s2: Default::default() };
+        let still =
+            |t_ns| ImuSample { t_ns, clock: Clock::Ptp, gyro_rad_s: Default::default(), acc_m_s2: Default::default() };
         let imu = |t_ns| Ok(MissionInput::Imu(Side::Robot, still(t_ns)));
-        let wheel = |t_ns| WheelSample { t_ns, vx_m_s: 0.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
+        let wheel = |t_ns| WheelSample { t_ns, clock: Clock::Ptp, vx_m_s: 0.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
         let inputs: Inputs = Box::new(vec![imu(10), imu(20), imu(30)].into_iter());
         let merged: Vec<u64> =
             with_wheels(inputs, vec![wheel(5), wheel(20), wheel(40)]).map(|i| i.map_or(0, |i| i.time_ns())).collect();

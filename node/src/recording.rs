@@ -244,7 +244,12 @@ mod tests {
                 rec.scan(scan(i));
                 for k in 0..20 {
                     let t_ns = 1_000_000_000 + i * 100_000_000 + k * 5_000_000;
-                    rec.imu(&ImuSample { t_ns, gyro_rad_s: V3::zeros(), acc_m_s2: V3::new(0.0, 0.0, 9.81) });
+                    rec.imu(&ImuSample {
+                        t_ns,
+                        clock: starc_time::Clock::Ptp,
+                        gyro_rad_s: V3::zeros(),
+                        acc_m_s2: V3::new(0.0, 0.0, 9.81),
+                    });
                 }
                 rec.pose(1_100_000_000 + i * 100_000_000, &Isometry3::identity());
             }

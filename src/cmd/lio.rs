@@ -20,13 +20,14 @@ use starc_bridge::external_imu::read_external_imu;
 use starc_bridge::is_mcap;
 use starc_bridge::livox::{lio_scan, packet_imu};
 use starc_bridge::recorded::{recorded, Recorded};
+use starc_bridge::wheels::{read_wheel_log, WheelFeedback};
 use starc_hil::tum::tum_line;
 use starc_livox::capture;
 use starc_livox::data::DataPacket;
 use starc_livox::scan::{Scan, ScanAssembler, ScanConfig, TagFilter};
 use starc_pipeline::cloud::{self, CloudFormat, CloudPoint, PointCloud};
 use starc_pipeline::lio::{
-    Health, ImuSample, ImuSource, InitStatus, Lio, LioConfig, LioFile, LioScan, LioStatus, ScanOutput,
+    Health, ImuSample, ImuSource, InitStatus, Lio, LioConfig, LioFile, LioScan, LioStatus, ScanOutput, WheelSample,
 };
 use starc_pipeline::timing::peak_rss_mib;
 use std::collections::BTreeMap;
@@ -52,6 +53,16 @@ pub struct Args {
     /// xyz m/s^2). Needs `[imu] source = "external"` in the config and `--device`.
     #[arg(long)]
     pub imu: Option<PathBuf>,
+    /// The base's wheel feedback, a `candump -l` log (C620 or CiA 402 frames, as `starc sim`
+    /// writes robot_can.log), fused into the LIO. Needs `--device` and `--base-config`.
+    #[arg(long, requires = "base_config")]
+    pub wheels: Option<PathBuf>,
+    /// The base driver's config (config/base.toml): kinematics, motor protocol, wheel ids.
+    #[arg(long)]
+    pub base_config: Option<PathBuf>,
+    /// Added to the wheel log's stamps to put them on the LiDAR's clock.
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    pub wheels_offset_ns: i64,
     /// Also write each device's raw scans to `<device>_scans.bin`.
     #[arg(long)]
     pub dump_scans: bool,
@@ -84,7 +95,7 @@ impl DeviceRun {
         writeln!(
             table,
             "end_s,health,refused,matched,rms_m,degeneracy_index,weak_directions,iterations,points_in,\
-             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us"
+             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us,wheel"
         )?;
         let dump = if dump {
             let mut w = create(&out.join(format!("{name}_scans.bin")))?;
@@ -156,7 +167,7 @@ impl DeviceRun {
             writeln!(self.tum, "{}", tum_line(o.end_ns, &o.lidar_pose))?;
             writeln!(
                 self.table,
-                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{}",
+                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{},{}",
                 o.end_ns / 1_000_000_000,
                 o.end_ns % 1_000_000_000,
                 o.health.name(),
@@ -171,7 +182,8 @@ impl DeviceRun {
                 o.map_points,
                 o.pos_sigma_m,
                 o.yaw_sigma_deg,
-                o.elapsed_us
+                o.elapsed_us,
+                o.wheel.name()
             )?;
             self.outputs.push(o);
         }
@@ -222,6 +234,18 @@ fn load_config(path: Option<&Path>) -> anyhow::Result<LioFile> {
     LioFile::from_toml(&text).with_context(|| format!("{}", path.display()))
 }
 
+/// The wheel log's twists (none without `--wheels`).
+fn wheel_samples(args: &Args) -> anyhow::Result<Vec<WheelSample>> {
+    let (Some(log), Some(base)) = (&args.wheels, &args.base_config) else { return Ok(Vec::new()) };
+    if args.device.is_none() {
+        bail!("--wheels belongs to one device (the robot's LiDAR): name it with --device");
+    }
+    let base = starc_base::BaseConfig::load(base).with_context(|| format!("{}", base.display()))?;
+    let samples = read_wheel_log(log, &WheelFeedback::from_base(&base), args.wheels_offset_ns)?;
+    tracing::info!(samples = samples.len(), "wheel odometry from {}", log.display());
+    Ok(samples)
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let file = load_config(args.config.as_deref())?;
     let cfg = file.to_config()?;
@@ -253,6 +277,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut last_shown = Instant::now();
     let mut devices: BTreeMap<DeviceKey, DeviceRun> = BTreeMap::new();
     let mut ext_next = 0usize;
+    let wheels = wheel_samples(&args)?;
+    let mut wheel_next = 0usize;
     let mut outs = Vec::new();
     let mut read_error = None;
     let cap = capture::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?;
@@ -283,6 +309,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 dev.push_imu(*s, &mut outs);
                 ext_next += 1;
             }
+        }
+        while let Some(w) = wheels.get(wheel_next).filter(|w| w.t_ns <= t_ns) {
+            dev.lio.push_wheel(*w);
+            wheel_next += 1;
         }
         if let Some(s) = packet_imu(&packet) {
             if external.is_none() {
@@ -364,8 +394,10 @@ fn conclude<'a>(
 /// A recording (MCAP): scans from every `/<device>/points` and IMU samples from `/<device>/imu`,
 /// in file order.
 fn run_recording(args: &Args, file: LioFile, cfg: &LioConfig, scan_cfg: &ScanConfig) -> anyhow::Result<()> {
-    if args.device.is_some() || args.imu.is_some() {
-        bail!("--device and --imu are for captures; a recording's devices are its topics (/robot/points, /robot/imu)");
+    if args.device.is_some() || args.imu.is_some() || args.wheels.is_some() {
+        bail!(
+            "--device, --imu and --wheels are for captures; a recording's devices are its topics (/robot/points, /robot/imu)"
+        );
     }
     let started = Instant::now();
     let period_ns = scan_cfg.period_ns();

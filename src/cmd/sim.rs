@@ -159,12 +159,13 @@ pub fn wheel_samples(
     dir: &std::path::Path,
     robot: &starc_hil::sim::scenario::Robot,
 ) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
-    use starc_bridge::wheels::{read_wheel_log, MotorFeedback};
-    use starc_hil::sim::scenario::MotorProtocol;
+    use starc_bridge::wheels::{read_wheel_log, MotorFeedback, WheelFeedback};
+    use starc_hil::sim::scenario::{MotorProtocol, WheelLayout};
     let motors = match robot.motors {
         MotorProtocol::C620 => MotorFeedback::C620,
         MotorProtocol::Cia402 => MotorFeedback::Cia402,
     };
-    let kinematics = starc_hil::sim::wheels::default_geometry(robot.wheels);
-    Ok(read_wheel_log(&dir.join("robot_can.log"), &kinematics, motors, 0)?)
+    let wheels = if robot.wheels == WheelLayout::Omni3 { 3 } else { 4 };
+    let base = WheelFeedback::plain(starc_hil::sim::wheels::default_geometry(robot.wheels), motors, wheels);
+    Ok(read_wheel_log(&dir.join("robot_can.log"), &base, 0)?)
 }

@@ -107,6 +107,7 @@ mod tests {
     fn sample(t_ns: u64, gyro: f64) -> ImuSample {
         ImuSample {
             t_ns,
+            clock: starc_time::Clock::Ptp,
             gyro_rad_s: Vector3::new(0.01, gyro, 0.0),
             acc_m_s2: Vector3::new(0.0, 9.81 * 0.6, 9.81 * 0.8),
         }

@@ -29,6 +29,6 @@ pub use odometry::{Lio, LioConfig, LioStatus, ScanOutput};
 pub use plane::Plane;
 pub use propagate::ImuNoise;
 pub use state::State;
-pub use types::{ImuSample, LioScan, TimedPoint};
+pub use types::{Clock, ImuSample, LioScan, TimedPoint};
 pub use update::{UpdateConfig, UpdateReport};
 pub use wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};

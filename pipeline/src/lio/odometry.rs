@@ -6,7 +6,7 @@ use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, 
 use super::ivox::VoxelMap;
 use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
-use super::types::{ImuSample, LioScan};
+use super::types::{Clock, ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
 use crate::timing::Stopwatch;
@@ -118,6 +118,9 @@ pub struct Lio {
     deskewed: Vec<Vector3<f64>>,
     /// Wheel samples not yet older than the newest scan's window.
     wheels: VecDeque<WheelSample>,
+    /// The clock of the first input; inputs on any other are refused and counted.
+    clock: Option<Clock>,
+    other_clock_inputs: u64,
 }
 
 impl Lio {
@@ -151,6 +154,8 @@ impl Lio {
             knots: Vec::new(),
             deskewed: Vec::new(),
             wheels: VecDeque::new(),
+            clock: None,
+            other_clock_inputs: 0,
             cfg,
         }
     }
@@ -167,8 +172,30 @@ impl Lio {
         &self.map
     }
 
+    /// Whether an input on `clock` may enter: the first input's clock is the filter's, and a
+    /// time on another clock (an IMU stamped by its host, a LiDAR that lost PTP) means nothing
+    /// against it.
+    fn on_my_clock(&mut self, clock: Clock) -> bool {
+        let mine = *self.clock.get_or_insert(clock);
+        if mine != clock {
+            self.other_clock_inputs += 1;
+            if self.other_clock_inputs.is_power_of_two() {
+                tracing::warn!(%mine, %clock, refused = self.other_clock_inputs, "LIO: an input on another clock refused");
+            }
+        }
+        mine == clock
+    }
+
+    /// Inputs refused for being on another clock than the first input's.
+    pub fn other_clock_inputs(&self) -> u64 {
+        self.other_clock_inputs
+    }
+
     /// Feeds one IMU sample (in time order); scans waiting for it are processed into `out`.
     pub fn push_imu(&mut self, s: ImuSample, out: &mut Vec<ScanOutput>) {
+        if !self.on_my_clock(s.clock) {
+            return;
+        }
         if s.t_ns > self.last_imu_ns {
             let dt_ns = (s.t_ns - self.last_imu_ns) as f64;
             if self.last_imu_ns > 0 && dt_ns < 1e8 {
@@ -194,7 +221,13 @@ impl Lio {
 
     /// Feeds one wheel sample (in time order, before the scans that end after it).
     pub fn push_wheel(&mut self, s: WheelSample) {
-        if s.vx_m_s.is_finite() && s.vy_m_s.is_finite() && s.wz_rad_s.is_finite() {
+        // The LiDAR and IMU set the filter's clock; wheels before them are of no use yet.
+        if self.clock.is_some()
+            && self.on_my_clock(s.clock)
+            && s.vx_m_s.is_finite()
+            && s.vy_m_s.is_finite()
+            && s.wz_rad_s.is_finite()
+        {
             self.wheels.push_back(s);
         }
     }
@@ -203,7 +236,7 @@ impl Lio {
     /// as is (the mission's cores also place it), not copied.
     pub fn push_scan(&mut self, scan: impl Into<Arc<LioScan>>, out: &mut Vec<ScanOutput>) {
         let scan = scan.into();
-        if self.status != LioStatus::Running || scan.end_ns <= self.state_ns {
+        if !self.on_my_clock(scan.clock) || self.status != LioStatus::Running || scan.end_ns <= self.state_ns {
             return;
         }
         self.scans.push_back(scan);
@@ -394,6 +427,25 @@ fn thin_out(points: &mut Vec<Vector3<f64>>, max: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inputs_on_another_clock_are_refused() {
+        let mut lio = Lio::new(LioConfig::default());
+        let mut out = Vec::new();
+        let still = |t_ns, clock| ImuSample {
+            t_ns,
+            clock,
+            gyro_rad_s: Vector3::zeros(),
+            acc_m_s2: Vector3::new(0.0, 0.0, 9.81),
+        };
+        lio.push_imu(still(0, Clock::Ptp), &mut out);
+        lio.push_imu(still(5_000_000, Clock::Host), &mut out);
+        let wheel = WheelSample { t_ns: 6_000_000, clock: Clock::Device, vx_m_s: 0.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
+        lio.push_wheel(wheel);
+        assert_eq!(lio.other_clock_inputs(), 2);
+        lio.push_imu(still(10_000_000, Clock::Ptp), &mut out);
+        assert_eq!(lio.other_clock_inputs(), 2, "the filter's own clock still enters");
+    }
 
     #[test]
     fn thinning_keeps_an_even_spread() {

@@ -96,8 +96,12 @@ mod tests {
         };
         let mut cov = Cov::identity() * 1e-6;
         // At rest with gravity cancelled by the specific force, 0.5 m/s^2 forward, 0.2 rad/s yaw.
-        let imu =
-            ImuSample { t_ns: 0, gyro_rad_s: Vector3::new(0.0, 0.0, 0.0), acc_m_s2: Vector3::new(0.5, 0.0, 9.81) };
+        let imu = ImuSample {
+            t_ns: 0,
+            clock: starc_time::Clock::Ptp,
+            gyro_rad_s: Vector3::new(0.0, 0.0, 0.0),
+            acc_m_s2: Vector3::new(0.5, 0.0, 9.81),
+        };
         for k in 0..200 {
             step(&mut s, &mut cov, &imu, k * 5_000_000, 0.005, &ImuNoise::default());
         }

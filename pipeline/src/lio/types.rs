@@ -1,11 +1,14 @@
-//! The LIO's inputs: IMU samples and timed points, already decoded and on one clock.
+//! The LIO's inputs: IMU samples and timed points, already decoded. Each says which clock its
+//! times are on; one filter takes one clock (its LiDAR's), and refuses the others.
 
 use nalgebra::Vector3;
+pub use starc_time::Clock;
 
 /// One IMU sample in the IMU's own frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImuSample {
     pub t_ns: u64,
+    pub clock: Clock,
     pub gyro_rad_s: Vector3<f64>,
     /// Specific force in m/s^2 (convert a device's g first).
     pub acc_m_s2: Vector3<f64>,
@@ -27,9 +30,11 @@ impl TimedPoint {
 }
 
 /// One sweep of the LiDAR: every point fired in `[start_ns, end_ns)`.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct LioScan {
     pub start_ns: u64,
     pub end_ns: u64,
+    /// The clock of `start_ns`, `end_ns` and every point's time.
+    pub clock: Clock,
     pub points: Vec<TimedPoint>,
 }

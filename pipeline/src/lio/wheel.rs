@@ -20,6 +20,7 @@ use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WheelSample {
     pub t_ns: u64,
+    pub clock: starc_time::Clock,
     pub vx_m_s: f64,
     pub vy_m_s: f64,
     pub wz_rad_s: f64,
@@ -69,17 +70,28 @@ pub enum WheelUse {
     Gated,
 }
 
+impl WheelUse {
+    pub fn name(self) -> &'static str {
+        match self {
+            WheelUse::None => "none",
+            WheelUse::Applied => "applied",
+            WheelUse::Gated => "gated",
+        }
+    }
+}
+
 /// The mean twist of the samples in `(end_ns - window_ns, end_ns]`.
 pub fn mean_twist(samples: impl Iterator<Item = WheelSample>, end_ns: u64, window_ns: u64) -> Option<WheelSample> {
     let from = end_ns.saturating_sub(window_ns);
-    let (mut sum, mut n) = (Vector3::zeros(), 0u32);
+    let (mut sum, mut n, mut clock) = (Vector3::zeros(), 0u32, starc_time::Clock::Ptp);
     for s in samples.filter(|s| s.t_ns > from && s.t_ns <= end_ns) {
+        clock = s.clock;
         sum += Vector3::new(s.vx_m_s, s.vy_m_s, s.wz_rad_s);
         n += 1;
     }
     (n > 0).then(|| {
         let m = sum / f64::from(n);
-        WheelSample { t_ns: end_ns, vx_m_s: m.x, vy_m_s: m.y, wz_rad_s: m.z }
+        WheelSample { t_ns: end_ns, clock, vx_m_s: m.x, vy_m_s: m.y, wz_rad_s: m.z }
     })
 }
 
@@ -150,7 +162,7 @@ mod tests {
         // Facing +y in the world, the filter thinks it stands still; the wheels say 1 m/s ahead.
         let mut s = state_moving(Vector3::zeros(), std::f64::consts::FRAC_PI_2);
         let mut cov = uncertain();
-        let twist = WheelSample { t_ns: 0, vx_m_s: 1.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
+        let twist = WheelSample { t_ns: 0, clock: starc_time::Clock::Ptp, vx_m_s: 1.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
         let cfg = WheelFusion { gate_chi2: 1e9, ..WheelFusion::default() };
         assert_eq!(wheel_update(&mut s, &mut cov, &Vector3::zeros(), &twist, &cfg), WheelUse::Applied);
         assert!(s.vel.y > 0.5 && s.vel.x.abs() < 0.05, "{:?}", s.vel);
@@ -164,7 +176,7 @@ mod tests {
         let mut s = state_moving(Vector3::zeros(), 0.0);
         let mut cov = uncertain();
         let cfg = WheelFusion { pos_imu_base: Vector3::new(0.5, 0.0, 0.0), ..WheelFusion::default() };
-        let twist = WheelSample { t_ns: 0, vx_m_s: 0.0, vy_m_s: 0.5, wz_rad_s: 1.0 };
+        let twist = WheelSample { t_ns: 0, clock: starc_time::Clock::Ptp, vx_m_s: 0.0, vy_m_s: 0.5, wz_rad_s: 1.0 };
         let gyro = Vector3::new(0.0, 0.0, 1.0);
         assert_eq!(wheel_update(&mut s, &mut cov, &gyro, &twist, &cfg), WheelUse::Applied);
         assert!(s.vel.norm() < 1e-9, "{:?}", s.vel);
@@ -175,7 +187,7 @@ mod tests {
         // A confident filter moving at 1 m/s; the wheels claim 4 m/s (spinning on ice).
         let mut s = state_moving(Vector3::new(1.0, 0.0, 0.0), 0.0);
         let mut cov = Cov::identity() * 1e-6;
-        let twist = WheelSample { t_ns: 0, vx_m_s: 4.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
+        let twist = WheelSample { t_ns: 0, clock: starc_time::Clock::Ptp, vx_m_s: 4.0, vy_m_s: 0.0, wz_rad_s: 0.0 };
         let before = s.clone();
         assert_eq!(wheel_update(&mut s, &mut cov, &Vector3::zeros(), &twist, &WheelFusion::default()), WheelUse::Gated);
         assert_eq!(s, before);
@@ -183,7 +195,7 @@ mod tests {
 
     #[test]
     fn the_mean_takes_only_the_window() {
-        let at = |t_ns, vx_m_s| WheelSample { t_ns, vx_m_s, vy_m_s: 0.0, wz_rad_s: 0.0 };
+        let at = |t_ns, vx_m_s| WheelSample { t_ns, clock: starc_time::Clock::Ptp, vx_m_s, vy_m_s: 0.0, wz_rad_s: 0.0 };
         let samples = [at(0, 9.0), at(80, 1.0), at(90, 2.0), at(100, 3.0), at(110, 9.0)];
         let m = mean_twist(samples.into_iter(), 100, 30).unwrap_or(at(0, f64::NAN));
         assert!((m.vx_m_s - 2.0).abs() < 1e-12 && m.t_ns == 100);

@@ -187,7 +187,7 @@ impl RigSide {
 mod tests {
     use super::*;
     use crate::ar::OrientedBox;
-    use crate::lio::TimedPoint;
+    use crate::lio::{Clock, TimedPoint};
     use nalgebra::Vector3;
 
     const MS: u64 = 1_000_000;
@@ -209,7 +209,12 @@ mod tests {
         let mut outs = Vec::new();
         let mut t = 0;
         while t <= until_ns + 20 * MS {
-            let sample = ImuSample { t_ns: t, gyro_rad_s: Vector3::zeros(), acc_m_s2: Vector3::new(0.0, 0.0, 9.81) };
+            let sample = ImuSample {
+                t_ns: t,
+                clock: Clock::Ptp,
+                gyro_rad_s: Vector3::zeros(),
+                acc_m_s2: Vector3::new(0.0, 0.0, 9.81),
+            };
             side.push_imu(sample, &mut outs);
             t += 5 * MS;
         }
@@ -222,7 +227,7 @@ mod tests {
             let t_ns = start_ns + u64::from(i) * 50_000;
             points.push(TimedPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns });
         }
-        side.push_scan(LioScan { start_ns, end_ns: until_ns, points }, &mut outs);
+        side.push_scan(LioScan { start_ns, end_ns: until_ns, clock: Clock::Ptp, points }, &mut outs);
         assert!(side.core().last().is_some(), "the LIO gave no pose");
     }
 
