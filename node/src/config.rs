@@ -203,7 +203,7 @@ mod tests {
     use super::*;
 
     fn shipped(name: &str) -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join(name)
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../config").join(name)
     }
 
     #[test]
