@@ -188,19 +188,7 @@ impl FoxgloveServer {
 }
 
 async fn accept_loop(listener: TcpListener, shared: Arc<Shared>, mut shutdown: Shutdown) {
-    loop {
-        let accepted = tokio::select! {
-            _ = super::wait_shutdown(&mut shutdown) => break,
-            a = listener.accept() => a,
-        };
-        let (stream, peer) = match accepted {
-            Ok(a) => a,
-            Err(e) => {
-                tracing::warn!("Foxglove server: accept failed: {e}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            }
-        };
+    while let Some((stream, peer)) = super::next_connection(&listener, &mut shutdown, "Foxglove server").await {
         if shared.clients.lock().map(|c| c.len()).unwrap_or(MAX_CLIENTS) >= MAX_CLIENTS {
             tracing::warn!("Foxglove server: refusing {peer}: {MAX_CLIENTS} clients already");
             continue;

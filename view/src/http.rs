@@ -47,20 +47,7 @@ pub async fn serve_http(
 
 async fn accept_loop(listener: TcpListener, hub: ViewHub, mut shutdown: Shutdown) {
     let slots = Arc::new(Semaphore::new(MAX_CLIENTS));
-    loop {
-        let accepted = tokio::select! {
-            _ = super::wait_shutdown(&mut shutdown) => break,
-            a = listener.accept() => a,
-        };
-        let (stream, peer) = match accepted {
-            Ok(a) => a,
-            Err(e) => {
-                // Out of file descriptors and the like: back off instead of spinning.
-                tracing::warn!("live view: accept failed: {e}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            }
-        };
+    while let Some((stream, peer)) = super::next_connection(&listener, &mut shutdown, "live view").await {
         let Ok(permit) = slots.clone().try_acquire_owned() else {
             // One non-blocking write: a full server must not queue work for the clients it refuses.
             let _ = stream.try_write(&status_response(503, "Service Unavailable", "too many viewers\n"));

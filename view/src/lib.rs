@@ -46,6 +46,29 @@ pub async fn wait_shutdown(shutdown: &mut Shutdown) {
     let _ = shutdown.wait_for(|stop| *stop).await;
 }
 
+/// The next connection on `listener`, or `None` once `shutdown` says stop. A failed accept (out
+/// of file descriptors and the like) is logged as `server`'s and retried after a pause, so the
+/// loop never spins.
+pub(crate) async fn next_connection(
+    listener: &tokio::net::TcpListener,
+    shutdown: &mut Shutdown,
+    server: &str,
+) -> Option<(tokio::net::TcpStream, std::net::SocketAddr)> {
+    loop {
+        let accepted = tokio::select! {
+            _ = wait_shutdown(shutdown) => return None,
+            a = listener.accept() => a,
+        };
+        match accepted {
+            Ok(a) => return Some(a),
+            Err(e) => {
+                tracing::warn!("{server}: accept failed: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+        }
+    }
+}
+
 /// `[view]` in fpv.toml. Every output is off unless configured, except that `png_every`
 /// only matters with `png_dir`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
