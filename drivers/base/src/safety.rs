@@ -28,6 +28,35 @@ pub enum Fault {
     EmergencyStop,
 }
 
+impl Fault {
+    /// Whether two faults are the same condition of the same part, whatever their details (an
+    /// error frame's counters, how long a motor was silent, an EMCY's text): a repeat of a
+    /// latched fault is counted against it, it does not add another.
+    pub fn same_kind(&self, other: &Fault) -> bool {
+        use Fault::*;
+        match (self, other) {
+            (FeedbackTimeout { wheel: a, .. }, FeedbackTimeout { wheel: b, .. })
+            | (HeartbeatTimeout { wheel: a, .. }, HeartbeatTimeout { wheel: b, .. })
+            | (NodeRebooted { wheel: a, .. }, NodeRebooted { wheel: b, .. })
+            | (DriveFault { wheel: a, .. }, DriveFault { wheel: b, .. })
+            | (Setup { wheel: a, .. }, Setup { wheel: b, .. }) => a == b,
+            (Emergency { wheel: a, code: c, .. }, Emergency { wheel: b, code: d, .. }) => a == b && c == d,
+            (Bus { fault: a }, Bus { fault: b }) => bus_kind(a) == bus_kind(b),
+            (EmergencyStop, EmergencyStop) => true,
+            _ => false,
+        }
+    }
+}
+
+/// A bus fault's kind: an error frame's class (`CAN_ERR_*` bits) counts, its details do not.
+fn bus_kind(f: &BusFault) -> (u8, u32) {
+    match f {
+        BusFault::SlcanFlags { .. } => (0, 0),
+        BusFault::TransmitRefused => (1, 0),
+        BusFault::ErrorFrame { class, .. } => (2, *class),
+    }
+}
+
 impl std::fmt::Display for Fault {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -72,6 +101,8 @@ pub struct Safety {
     watchdog_tripped: bool,
     estop_pressed: bool,
     latched: Vec<Fault>,
+    /// How often each latched fault came again since it was latched.
+    repeats: Vec<u64>,
 }
 
 /// Why a clear was refused.
@@ -88,6 +119,7 @@ impl Safety {
             watchdog_tripped: false,
             estop_pressed: false,
             latched: Vec::new(),
+            repeats: Vec::new(),
         }
     }
 
@@ -97,13 +129,23 @@ impl Safety {
         self.watchdog_tripped = false;
     }
 
-    /// Latches `fault` unless the same one is latched already; true when it is new.
+    /// Latches `fault` unless one of its kind is latched already (then counts the repeat, so an
+    /// error-frame storm holds one entry, not one per frame); true when it is new.
     pub fn latch(&mut self, fault: Fault) -> bool {
-        if self.latched.contains(&fault) {
+        if let Some(i) = self.latched.iter().position(|f| f.same_kind(&fault)) {
+            if let Some(n) = self.repeats.get_mut(i) {
+                *n = n.saturating_add(1);
+            }
             return false;
         }
         self.latched.push(fault);
+        self.repeats.push(0);
         true
+    }
+
+    /// How often each latched fault (in [`Self::latched`]'s order) came again.
+    pub fn repeats(&self) -> &[u64] {
+        &self.repeats
     }
 
     /// The emergency stop input; pressing it latches [`Fault::EmergencyStop`].
@@ -117,6 +159,7 @@ impl Safety {
         if self.estop_pressed {
             return Err(ClearRefused::EmergencyStopPressed);
         }
+        self.repeats.clear();
         Ok(std::mem::take(&mut self.latched))
     }
 
@@ -187,5 +230,23 @@ mod tests {
         assert!(!s.set_estop(false));
         assert_eq!(s.mode(at_ms(4)).0, DriveMode::Halt, "released is not cleared");
         assert_eq!(s.clear(), Ok(vec![Fault::EmergencyStop]));
+    }
+
+    #[test]
+    fn an_error_frame_storm_latches_one_fault_and_counts_the_rest() {
+        let mut safety = Safety::new(200);
+        for i in 0..10_000u32 {
+            let data = [(i % 256) as u8, (i / 256) as u8, 0, 0, 0, 0, 0, 0];
+            safety.latch(Fault::Bus { fault: BusFault::ErrorFrame { class: 0x4, data } });
+        }
+        // Another class, another wheel's timeout, and the same wheel's timeout with another length.
+        assert!(safety.latch(Fault::Bus { fault: BusFault::ErrorFrame { class: 0x40, data: [0; 8] } }));
+        assert!(safety.latch(Fault::FeedbackTimeout { wheel: 0, motor: 1, silent_ms: 120 }));
+        assert!(safety.latch(Fault::FeedbackTimeout { wheel: 1, motor: 2, silent_ms: 120 }));
+        assert!(!safety.latch(Fault::FeedbackTimeout { wheel: 0, motor: 1, silent_ms: 900 }));
+        assert_eq!(safety.latched().len(), 4);
+        assert_eq!(safety.repeats(), &[9_999, 0, 1, 0]);
+        assert_eq!(safety.clear().map(|f| f.len()), Ok(4));
+        assert!(safety.repeats().is_empty());
     }
 }
