@@ -5,7 +5,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Isometry3;
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
 use starc_pipeline::lio::{Health, ImuSample, Lio, LioConfig, LioFile, LioScan, LioStatus, Refusal, ScanOutput};
@@ -48,21 +48,9 @@ fn lab() -> &'static Run {
     })
 }
 
-/// The simulator's external IMU CSV (`time_s,gyro xyz,accel xyz`).
+/// The simulator's external IMU CSV (`time_s,gyro xyz,accel xyz`), read as `starc lio --imu` reads it.
 fn external_imu(dir: &Path) -> Vec<ImuSample> {
-    let text = std::fs::read_to_string(dir.join("robot_imu_external.csv")).unwrap();
-    text.lines()
-        .skip(1)
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
-            ImuSample {
-                t_ns: ((v[0] * 1e6).round() as u64) * 1000,
-                clock: starc_time::Clock::Ptp,
-                gyro_rad_s: Vector3::new(v[1], v[2], v[3]),
-                acc_m_s2: Vector3::new(v[4], v[5], v[6]),
-            }
-        })
-        .collect()
+    starc_bridge::external_imu::read_external_imu(&dir.join("robot_imu_external.csv"), 0).unwrap()
 }
 
 fn run_lio(cfg: LioConfig, imu: &[ImuSample], scans: Vec<LioScan>) -> (Lio, Vec<ScanOutput>) {

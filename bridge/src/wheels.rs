@@ -54,11 +54,12 @@ impl WheelFeedback {
 
     /// Wheels 1..=n in kinematics order, none inverted, an M3508 gearbox or the drives' default
     /// units (the simulator's base).
-    pub fn plain(kinematics: KinematicsConfig, motors: MotorFeedback, wheel_count: u8) -> Self {
+    pub fn plain(kinematics: KinematicsConfig, motors: MotorFeedback) -> Self {
+        let ids = 1..=u8::try_from(kinematics.wheel_count()).unwrap_or(u8::MAX);
         Self {
             kinematics,
             motors,
-            wheels: (1..=wheel_count).map(|id| (id, false)).collect(),
+            wheels: ids.map(|id| (id, false)).collect(),
             gear_ratio: M3508_GEAR_RATIO,
             units_per_rad_s: Cia402Config::default().units_per_rad_s,
         }
@@ -189,7 +190,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let path = dir.path().join("robot_can.log");
         std::fs::write(&path, log).unwrap_or_else(|e| panic!("{e}"));
-        let base = WheelFeedback::plain(OMNI3, MotorFeedback::C620, 3);
+        let base = WheelFeedback::plain(OMNI3, MotorFeedback::C620);
         let got = read_wheel_log(&path, &base, 0).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(got.len(), 3);
         assert_eq!(got[1].t_ns, 1_010_000_000);

@@ -160,12 +160,11 @@ pub fn wheel_samples(
     robot: &starc_hil::sim::scenario::Robot,
 ) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
     use starc_bridge::wheels::{read_wheel_log, MotorFeedback, WheelFeedback};
-    use starc_hil::sim::scenario::{MotorProtocol, WheelLayout};
+    use starc_hil::sim::scenario::MotorProtocol;
     let motors = match robot.motors {
         MotorProtocol::C620 => MotorFeedback::C620,
         MotorProtocol::Cia402 => MotorFeedback::Cia402,
     };
-    let wheels = if robot.wheels == WheelLayout::Omni3 { 3 } else { 4 };
-    let base = WheelFeedback::plain(starc_hil::sim::wheels::default_geometry(robot.wheels), motors, wheels);
+    let base = WheelFeedback::plain(starc_hil::sim::wheels::default_geometry(robot.wheels), motors);
     Ok(read_wheel_log(&dir.join("robot_can.log"), &base, 0)?)
 }
