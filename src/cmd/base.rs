@@ -5,6 +5,10 @@
 //! keyboard teleop in the terminal: W/S forward/back, A/D left/right, Q/E turn, space stops,
 //! c clears faults, x or Esc quits. `starc mock motors` (the [`MockArgs`] here) plays C620 ESCs
 //! or CiA 402 drives behind an slcan adapter on a pty.
+//!
+//! SIGINT, SIGTERM and SIGHUP (the terminal or the SSH session gone) end either command in
+//! order: the motors are halted first. A `kill -9` cannot be caught; for that the CiA 402
+//! drives watch the host's heartbeat and stop by themselves (docs/safety.md).
 
 use anyhow::Context;
 use starc_base::runner::{open_bus, spawn, BaseHandle};
@@ -58,6 +62,34 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Status(a) => runtime.block_on(status(a)),
         Command::Drive(a) => runtime.block_on(drive(a)),
+    }
+}
+
+/// SIGINT, SIGTERM and SIGHUP, caught for as long as this lives. Installed before the base
+/// starts: from then on none of them ends the process the default way, halt frames unsent.
+struct Signals {
+    interrupt: tokio::signal::unix::Signal,
+    terminate: tokio::signal::unix::Signal,
+    hangup: tokio::signal::unix::Signal,
+}
+
+impl Signals {
+    fn install() -> anyhow::Result<Self> {
+        use tokio::signal::unix::{signal, SignalKind};
+        Ok(Self {
+            interrupt: signal(SignalKind::interrupt()).context("catching SIGINT")?,
+            terminate: signal(SignalKind::terminate()).context("catching SIGTERM")?,
+            hangup: signal(SignalKind::hangup()).context("catching SIGHUP")?,
+        })
+    }
+
+    /// The name of the next signal.
+    async fn recv(&mut self) -> &'static str {
+        tokio::select! {
+            _ = self.interrupt.recv() => "SIGINT",
+            _ = self.terminate.recv() => "SIGTERM",
+            _ = self.hangup.recv() => "SIGHUP",
+        }
     }
 }
 
@@ -119,12 +151,16 @@ async fn status(args: StatusArgs) -> anyhow::Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         anyhow::bail!("--seconds must be positive");
     }
+    let mut signals = Signals::install()?;
     let (base, mut events) = start(&args.config).await?;
     let mut wait = Duration::from_secs_f64(args.seconds);
     loop {
         tokio::select! {
             _ = tokio::time::sleep(wait) => {}
-            c = tokio::signal::ctrl_c() => { c?; break; }
+            name = signals.recv() => {
+                eprintln!("{name}: halting the motors");
+                break;
+            }
         }
         while let Ok(e) = events.try_recv() {
             if !args.json {
@@ -203,6 +239,7 @@ fn key_of(event: crossterm::event::Event) -> Option<Key> {
 }
 
 async fn drive(args: DriveArgs) -> anyhow::Result<()> {
+    let mut signals = Signals::install()?;
     let (base, mut events) = start(&args.config).await?;
     let raw = RawTerminal::enter()?;
     let (key_tx, mut keys) = tokio::sync::mpsc::channel(64);
@@ -228,6 +265,12 @@ async fn drive(args: DriveArgs) -> anyhow::Result<()> {
     let mut shown = 0u32;
     let result: anyhow::Result<()> = loop {
         tokio::select! {
+            // In raw mode Ctrl-C is a key; SIGINT still comes from `kill`, SIGTERM from a
+            // service manager, SIGHUP from a terminal or SSH session that went away.
+            name = signals.recv() => {
+                let _ = write!(out, "\r\n{name}: halting the motors\r\n");
+                break Ok(());
+            }
             Some(event) = keys.recv() => match key_of(event) {
                 Some(Key::Quit) => break Ok(()),
                 Some(Key::Stop) => twist = Twist::ZERO,
@@ -271,12 +314,17 @@ async fn drive(args: DriveArgs) -> anyhow::Result<()> {
             }
         }
     };
+    // Halt first: the terminal may be gone (SIGHUP), and nothing below may hold up the stop.
+    let summary = base.stop().await;
     let _ = quit_tx.send(());
     let _ = reader.join();
     drop(raw);
-    println!();
-    let summary = base.stop().await?;
-    println!(
+    // Writes that fail (no terminal any more) are ignored: `println!` would panic.
+    let mut out = std::io::stdout();
+    let _ = writeln!(out);
+    let summary = summary?;
+    let _ = writeln!(
+        out,
         "stopped; bus: {} sent, {} received, {} malformed",
         summary.bus.frames_sent, summary.bus.frames_received, summary.bus.malformed
     );

@@ -22,6 +22,10 @@ pub struct BaseConfig {
     /// A CAN adapter error (slcan `F` flags, error frames, refused transmits) stops the base.
     #[serde(default = "default_true")]
     pub stop_on_bus_fault: bool,
+    /// A frame the transport has not taken within this long latches a fault (the base halts),
+    /// so that a stalled adapter cannot hold the control loop, and its watchdog, hostage.
+    #[serde(default = "default_send_timeout_ms")]
+    pub send_timeout_ms: u64,
     pub can: CanConfig,
     pub kinematics: KinematicsConfig,
     pub limits: LimitsConfig,
@@ -33,6 +37,9 @@ fn default_control_period_ms() -> u64 {
 }
 fn default_watchdog_ms() -> u64 {
     200
+}
+fn default_send_timeout_ms() -> u64 {
+    50
 }
 fn default_true() -> bool {
     true
@@ -116,6 +123,15 @@ impl BaseConfig {
         }
         if self.watchdog_ms < 2 * self.control_period_ms {
             return Err(BaseError::config("watchdog_ms", "must be at least two control periods"));
+        }
+        if self.send_timeout_ms == 0 || self.send_timeout_ms > self.watchdog_ms {
+            return Err(BaseError::config("send_timeout_ms", "must be 1 ms up to watchdog_ms"));
+        }
+        if self.motors.protocol == Protocol::Cia402
+            && u64::from(self.motors.cia402.host_heartbeat_ms) < self.control_period_ms
+        {
+            // The heartbeat goes out from the control tick: it cannot be more frequent.
+            return Err(BaseError::config("motors.cia402.host_heartbeat_ms", "must be at least one control period"));
         }
         if self.motors.feedback_timeout_ms < self.control_period_ms {
             return Err(BaseError::config("motors.feedback_timeout_ms", "must be at least one control period"));

@@ -57,6 +57,8 @@ pub struct BaseStatus {
     pub odometry: Option<OdometrySample>,
     /// Frames from our motors that did not parse.
     pub malformed_frames: u64,
+    /// CANopen heartbeats the host has sent (CiA 402; 0 for C620).
+    pub host_heartbeats: u64,
 }
 
 pub struct Base {
@@ -141,6 +143,14 @@ impl Base {
         }
     }
 
+    /// The transport did not take a frame within `timeout_ms`: latched, so the base halts until
+    /// the operator clears it.
+    pub fn send_timed_out(&mut self, timeout_ms: u64, now: Stamp) {
+        tracing::warn!("CAN send timed out after {timeout_ms} ms");
+        self.faults.push(Fault::SendTimeout { timeout_ms });
+        self.latch_new(now);
+    }
+
     fn latch_new(&mut self, now: Stamp) {
         for fault in self.faults.drain(..) {
             if self.safety.latch(fault.clone()) {
@@ -197,6 +207,7 @@ impl Base {
             wheels: self.motors.wheel_states(),
             odometry: self.odometry.last(),
             malformed_frames: self.motors.malformed(),
+            host_heartbeats: self.motors.heartbeats_sent(),
         }
     }
 

@@ -82,6 +82,14 @@ impl Motors {
         }
     }
 
+    /// Host heartbeats sent (CiA 402 only: the C620 has no such thing).
+    pub fn heartbeats_sent(&self) -> u64 {
+        match self {
+            Self::C620(_) => 0,
+            Self::Cia402(g) => g.heartbeats_sent(),
+        }
+    }
+
     pub fn malformed(&self) -> u64 {
         match self {
             Self::C620(g) => g.malformed,

@@ -1,5 +1,7 @@
-//! The tokio loop around [`Base`]: a control tick, the bus, operator requests, and adapter
-//! status polls. Received frames are re-stamped on a monotonic clock anchored to the host
+//! The tokio loop around [`Base`]: a control tick (polled first, so nothing starves it),
+//! operator requests, the bus, and adapter status polls. Every send has a time-out that latches a
+//! fault; the halt frames go out when the loop stops, and, from a drop guard, when it is torn
+//! down by a panic or an abort. Received frames are re-stamped on a monotonic clock anchored to the host
 //! realtime clock at start, so watchdog and time-outs never see NTP steps.
 
 use crate::config::CanConfig;
@@ -11,6 +13,8 @@ use starc_can::slcan::SlcanSerial;
 use starc_can::socketcan::SocketCanBus;
 use starc_can::{AnyBus, BusEvent, BusStats, CanBus, CanFrame};
 use starc_time::Stamp;
+use std::future::Future;
+use std::task::{Context, Poll, Waker};
 use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
@@ -52,6 +56,8 @@ pub struct RunSummary {
     pub bus: BusStats,
     pub ticks: u64,
     pub events_dropped: u64,
+    /// Batches cut short by the send time-out (each latched [`Fault::SendTimeout`]).
+    pub send_timeouts: u64,
 }
 
 /// Talks to a running base.
@@ -135,16 +141,61 @@ impl BaseHandle {
     }
 }
 
-async fn send_all<B: CanBus>(bus: &mut B, frames: &mut Vec<CanFrame>) -> Result<()> {
+/// How a batch of frames went out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sent {
+    All,
+    /// The transport did not take a frame within the send time-out; the rest were dropped.
+    TimedOut,
+}
+
+/// Sends `frames` in order, each within `timeout`. A transport that blocks (an adapter that
+/// stopped reading, a full queue) must not hold the loop: the watchdog, the status and the
+/// operator's stop all run on it. A send cut short may leave half an slcan line behind, which
+/// the adapter refuses (and reports) like any other garbage.
+async fn send_all<B: CanBus>(bus: &mut B, frames: &mut Vec<CanFrame>, timeout: Duration) -> Result<Sent> {
     for f in frames.drain(..) {
-        bus.send(&f).await?;
+        match tokio::time::timeout(timeout, bus.send(&f)).await {
+            Ok(sent) => sent?,
+            Err(_elapsed) => return Ok(Sent::TimedOut),
+        }
     }
-    Ok(())
+    Ok(Sent::All)
+}
+
+/// Tries to send `frame` without waiting: polls the send once. For a drop guard, which cannot
+/// await; a transport with room in its queue (the usual case) takes the frame at once.
+fn send_now<B: CanBus>(bus: &mut B, frame: &CanFrame) -> bool {
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut send = std::pin::pin!(bus.send(frame));
+    matches!(send.as_mut().poll(&mut cx), Poll::Ready(Ok(())))
+}
+
+/// The bus and the controller, owned for as long as the loop runs. When the loop does not end
+/// in order (a panic unwinds through it, the task is aborted, the runtime shuts down under
+/// it), dropping the guard still sends the halt frames, best effort: an ending process must
+/// not leave the motors on their last command.
+struct HaltGuard<B: CanBus> {
+    bus: B,
+    base: Base,
+    /// The halt frames went out in order; nothing left to do on drop.
+    halted: bool,
+}
+
+impl<B: CanBus> Drop for HaltGuard<B> {
+    fn drop(&mut self) {
+        if self.halted {
+            return;
+        }
+        let frames = self.base.halt_frames();
+        let sent = frames.iter().filter(|f| send_now(&mut self.bus, f)).count();
+        tracing::warn!("the base loop ended without an orderly halt: {sent} of {} halt frames sent", frames.len());
+    }
 }
 
 async fn run<B: CanBus>(
-    mut bus: B,
-    mut base: Base,
+    bus: B,
+    base: Base,
     options: RunnerOptions,
     mut requests: mpsc::Receiver<Request>,
     status: watch::Sender<BaseStatus>,
@@ -153,6 +204,9 @@ async fn run<B: CanBus>(
 ) -> Result<RunSummary> {
     let clock = MonotonicHost::new();
     let period = Duration::from_millis(base.config().control_period_ms);
+    let send_timeout_ms = base.config().send_timeout_ms;
+    let send_timeout = Duration::from_millis(send_timeout_ms);
+    let mut g = HaltGuard { bus, base, halted: false };
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let poll_every = options.status_poll.unwrap_or(Duration::from_secs(3600));
@@ -163,47 +217,66 @@ async fn run<B: CanBus>(
         tokio::select! {
             biased;
             _ = &mut stop => break Ok(()),
-            received = bus.recv() => match received {
-                Ok(BusEvent::Frame(mut rx)) => {
-                    rx.host = clock.now();
-                    base.handle(&BusEvent::Frame(rx));
+            // The tick before the bus: a flood of received frames must never starve the
+            // command watchdog, the host heartbeat or the time-outs.
+            _ = tick.tick() => {
+                g.base.tick(clock.now(), &mut frames);
+                summary.ticks += 1;
+                match send_all(&mut g.bus, &mut frames, send_timeout).await {
+                    Ok(Sent::All) => {}
+                    Ok(Sent::TimedOut) => {
+                        summary.send_timeouts += 1;
+                        g.base.send_timed_out(send_timeout_ms, clock.now());
+                    }
+                    Err(e) => break Err(e),
                 }
-                Ok(BusEvent::Fault { fault, .. }) => base.handle(&BusEvent::Fault { fault, host: clock.now() }),
-                Err(e) => break Err(e.into()),
-            },
+                status.send_replace(g.base.status());
+            }
+            // Then the operator's requests (at most a channel's worth: they cannot flood), so
+            // that a busy bus cannot delay a stop, an e-stop or a clear.
             request = requests.recv() => match request {
-                Some(Request::Command(t)) => base.command(t, clock.now()),
-                Some(Request::Estop(p)) => base.set_estop(p, clock.now()),
+                Some(Request::Command(t)) => g.base.command(t, clock.now()),
+                Some(Request::Estop(p)) => g.base.set_estop(p, clock.now()),
                 Some(Request::Clear(reply)) => {
-                    let _ = reply.send(base.clear_faults(clock.now()));
+                    let _ = reply.send(g.base.clear_faults(clock.now()));
                 }
                 None => break Ok(()),
             },
-            _ = tick.tick() => {
-                base.tick(clock.now(), &mut frames);
-                summary.ticks += 1;
-                if let Err(e) = send_all(&mut bus, &mut frames).await {
-                    break Err(e);
+            received = g.bus.recv() => match received {
+                Ok(BusEvent::Frame(mut rx)) => {
+                    rx.host = clock.now();
+                    g.base.handle(&BusEvent::Frame(rx));
                 }
-                status.send_replace(base.status());
-            }
+                Ok(BusEvent::Fault { fault, .. }) => g.base.handle(&BusEvent::Fault { fault, host: clock.now() }),
+                Err(e) => break Err(e.into()),
+            },
             _ = poll.tick(), if options.status_poll.is_some() => {
-                if let Err(e) = bus.request_status().await {
+                if let Err(e) = g.bus.request_status().await {
                     break Err(e.into());
                 }
             }
         }
-        for e in base.drain_events() {
+        for e in g.base.drain_events() {
             if events.try_send(e).is_err() {
                 summary.events_dropped += 1;
             }
         }
     };
-    let mut halt = base.halt_frames();
-    let halted = send_all(&mut bus, &mut halt).await;
-    status.send_replace(base.status());
-    summary.bus = bus.stats();
+    let mut halt = g.base.halt_frames();
+    let halted = send_all(&mut g.bus, &mut halt, send_timeout).await;
+    // Only an orderly halt disarms the guard; otherwise it tries once more, without waiting.
+    g.halted = matches!(halted, Ok(Sent::All));
+    status.send_replace(g.base.status());
+    summary.bus = g.bus.stats();
     outcome?;
-    halted?;
+    if halted? == Sent::TimedOut {
+        return Err(BaseError::Io {
+            context: "halting the motors".into(),
+            source: std::io::Error::new(std::io::ErrorKind::TimedOut, "the CAN transport did not take the halt frames"),
+        });
+    }
     Ok(summary)
 }
+
+#[cfg(test)]
+mod tests;

@@ -26,6 +26,9 @@ pub enum Fault {
     Bus { fault: BusFault },
     /// The emergency stop input was asserted.
     EmergencyStop,
+    /// A frame could not be handed to the CAN transport within the send time-out (adapter
+    /// stalled, serial port blocked, kernel queue full): commands may not be reaching the motors.
+    SendTimeout { timeout_ms: u64 },
 }
 
 impl Fault {
@@ -42,7 +45,7 @@ impl Fault {
             | (Setup { wheel: a, .. }, Setup { wheel: b, .. }) => a == b,
             (Emergency { wheel: a, code: c, .. }, Emergency { wheel: b, code: d, .. }) => a == b && c == d,
             (Bus { fault: a }, Bus { fault: b }) => bus_kind(a) == bus_kind(b),
-            (EmergencyStop, EmergencyStop) => true,
+            (EmergencyStop, EmergencyStop) | (SendTimeout { .. }, SendTimeout { .. }) => true,
             _ => false,
         }
     }
@@ -76,6 +79,7 @@ impl std::fmt::Display for Fault {
             Self::Setup { wheel, node, reason } => write!(f, "wheel {wheel} (node {node}): setup failed: {reason}"),
             Self::Bus { fault } => write!(f, "CAN bus: {fault:?}"),
             Self::EmergencyStop => write!(f, "emergency stop"),
+            Self::SendTimeout { timeout_ms } => write!(f, "CAN transport: a frame took over {timeout_ms} ms to send"),
         }
     }
 }

@@ -1,11 +1,18 @@
 //! A mock CiA 402 drive (profile velocity), sans-IO: an object dictionary served by expedited
 //! SDO, NMT with boot-up and heartbeats, PDOs built from the mapping objects, the power state
 //! machine driven by the controlword, EMCY on faults, and a first-order motor.
+//!
+//! The drive side of a lost host: the consumer heartbeat (0x1016:01, CiA 301) watches the
+//! host's heartbeat once it has heard one; when it is silent longer than the configured time
+//! the drive sends EMCY 0x8130 (heartbeat error) and takes its abort connection option
+//! (0x6007, CiA 402): 1 fault, 2 disable voltage, 3 quick stop (target velocity zeroed, the
+//! motor brakes). Every state change is logged with the drive's time (`tracing`, target
+//! `starc_hil::motors::cia402`) and the times that matter are kept in [`DriveStats`].
 
 use crate::motors::dynamics::FirstOrder;
-use starc_base::cia402::drive::{object, DriveState};
+use starc_base::cia402::drive::{abort_connection, controlword, object, DriveState};
 use starc_base::cia402::emcy::Emergency;
-use starc_base::cia402::nmt::{heartbeat_frame, NmtCommand, NmtState};
+use starc_base::cia402::nmt::{heartbeat_frame, parse_consumer_heartbeat_entry, NmtCommand, NmtState};
 use starc_base::cia402::sdo::{abort, Address, SdoRequest, SdoResponse, Value};
 use starc_can::{CanFrame, CanId};
 use std::collections::BTreeMap;
@@ -36,6 +43,9 @@ fn dictionary(node: u8) -> BTreeMap<Address, Entry> {
     BTreeMap::from([
         (a(0x1000, 0), ro(DEVICE_TYPE, 4)),
         (a(0x1001, 0), ro(0, 1)),
+        // One consumer heartbeat entry, unused (0) until the host writes it.
+        (a(0x1016, 0), ro(1, 1)),
+        (a(0x1016, 1), rw(0, 4)),
         (a(0x1017, 0), rw(0, 2)),
         (a(0x1018, 0), ro(4, 1)),
         (a(0x1018, 1), ro(0x0053_5443, 4)),
@@ -60,6 +70,8 @@ fn dictionary(node: u8) -> BTreeMap<Address, Entry> {
         (a(0x1A00, 2), rw(0x606C_0020, 4)),
         (a(0x1A00, 3), rw(0, 4)),
         (a(0x1A00, 4), rw(0, 4)),
+        // CiA 402's default abort connection option: fault signal.
+        (a(0x6007, 0), rw(u32::from(abort_connection::FAULT as u16), 2)),
         (a(0x6040, 0), rw(0, 2)),
         (a(0x6041, 0), ro(u32::from(DriveState::SwitchOnDisabled.statusword()), 2)),
         (a(0x6060, 0), rw(0, 1)),
@@ -80,6 +92,19 @@ pub struct DriveStats {
     pub heartbeats: u64,
     pub emcys: u64,
     pub nmt: u64,
+    /// Heartbeats heard from the node the consumer heartbeat watches (the host).
+    pub host_heartbeats: u64,
+    /// Drive time (ns) of the last of them.
+    pub last_host_heartbeat_ns: Option<u64>,
+    /// Consumer heartbeat time-outs: the host fell silent and 0x6007 was applied.
+    pub consumer_timeouts: u64,
+    /// Drive time of the last time-out.
+    pub heartbeat_lost_ns: Option<u64>,
+    /// Drive time of the last change out of Operation Enabled: when the drive stopped driving.
+    pub left_enabled_ns: Option<u64>,
+    /// The state and actual velocity (drive units) now.
+    pub state: Option<DriveState>,
+    pub actual_velocity: i32,
 }
 
 /// One drive.
@@ -95,6 +120,11 @@ pub struct MockDrive {
     next_heartbeat_ns: u64,
     next_tpdo_ns: u64,
     booted: bool,
+    /// The drive's time of the frame or poll being handled (for the log and the stats).
+    now_ns: u64,
+    /// The consumer heartbeat runs: a heartbeat of the watched node was heard since 0x1016 was
+    /// written or since the last time-out (CiA 301: monitoring starts with the first one).
+    consumer_armed: bool,
     /// The injected fault stays until this many fault resets have been tried (0: clears at once).
     fault_sticky_resets: u32,
     pub stats: DriveStats,
@@ -113,8 +143,10 @@ impl MockDrive {
             next_heartbeat_ns: 0,
             next_tpdo_ns: 0,
             booted: false,
+            now_ns: 0,
+            consumer_armed: false,
             fault_sticky_resets: 0,
-            stats: DriveStats::default(),
+            stats: DriveStats { state: Some(DriveState::SwitchOnDisabled), ..DriveStats::default() },
         }
     }
 
@@ -146,8 +178,60 @@ impl MockDrive {
     }
 
     fn set_state(&mut self, s: DriveState) {
+        if s != self.state {
+            tracing::info!(
+                node = self.node,
+                t_ms = self.now_ns as f64 * 1e-6,
+                "drive state {:?} -> {:?}",
+                self.state,
+                s
+            );
+            if self.state == DriveState::OperationEnabled {
+                self.stats.left_enabled_ns = Some(self.now_ns);
+            }
+        }
         self.state = s;
+        self.stats.state = Some(s);
         self.set(object::STATUSWORD, u32::from(s.statusword()));
+    }
+
+    /// The node and time (ms) the consumer heartbeat watches; `None` when unused.
+    fn consumer(&self) -> Option<(u8, u16)> {
+        let entry = self.od.get(&Address::new(object::CONSUMER_HEARTBEAT, 1)).map(|e| e.value)?;
+        let (node, time_ms) = parse_consumer_heartbeat_entry(entry);
+        (node != 0 && time_ms != 0).then_some((node, time_ms))
+    }
+
+    /// The host is gone: EMCY 0x8130 and the abort connection option (0x6007).
+    fn host_lost(&mut self, silent_ms: f64, out: &mut Vec<CanFrame>) {
+        self.consumer_armed = false;
+        self.stats.consumer_timeouts += 1;
+        self.stats.heartbeat_lost_ns = Some(self.now_ns);
+        let option = self.get(object::ABORT_CONNECTION_OPTION) as u16 as i16;
+        tracing::warn!(
+            node = self.node,
+            t_ms = self.now_ns as f64 * 1e-6,
+            "host heartbeat silent for {silent_ms:.1} ms: abort connection option {option}"
+        );
+        self.set(object::ERROR_REGISTER, 0x11);
+        self.emcy(0x8130, 0x11, out);
+        match option {
+            abort_connection::FAULT if !matches!(self.state, DriveState::Fault | DriveState::FaultReactionActive) => {
+                self.set(object::TARGET_VELOCITY, 0);
+                self.set_state(DriveState::Fault);
+            }
+            abort_connection::DISABLE_VOLTAGE => {
+                self.set(object::TARGET_VELOCITY, 0);
+                self.on_controlword(controlword::DISABLE_VOLTAGE, out);
+            }
+            abort_connection::QUICK_STOP => {
+                // Zeroed so that re-enabling cannot resume the old speed.
+                self.set(object::TARGET_VELOCITY, 0);
+                self.on_controlword(controlword::QUICK_STOP, out);
+            }
+            // No action, or a manufacturer's code this mock does not have.
+            _ => {}
+        }
     }
 
     /// Injects a motor fault: state Fault, EMCY 0x2310 (continuous over-current).
@@ -217,6 +301,10 @@ impl MockDrive {
         if let Some(e) = self.od.get_mut(&at) {
             e.value = value.raw;
         }
+        if at.index == object::CONSUMER_HEARTBEAT {
+            // A new entry starts monitoring afresh, with the next heartbeat heard.
+            self.consumer_armed = false;
+        }
         if at.index == object::CONTROLWORD {
             self.on_controlword(value.raw as u16, out);
         }
@@ -236,9 +324,19 @@ impl MockDrive {
         (v & 0x8000_0000 == 0).then_some((v & 0x7FF) as u16)
     }
 
-    /// A frame on the bus; answers are appended to `out`.
-    pub fn on_frame(&mut self, frame: &CanFrame, out: &mut Vec<CanFrame>) {
+    /// A frame on the bus at drive time `now_ns`; answers are appended to `out`.
+    pub fn on_frame(&mut self, frame: &CanFrame, now_ns: u64, out: &mut Vec<CanFrame>) {
+        self.now_ns = now_ns;
         let CanId::Standard(id) = frame.id() else { return };
+        // Heartbeats are consumed in every NMT state, stopped included (CiA 301).
+        if let Some((node, _)) = self.consumer() {
+            if id == 0x700 + u16::from(node) && !frame.data().is_empty() {
+                self.stats.host_heartbeats += 1;
+                self.stats.last_host_heartbeat_ns = Some(now_ns);
+                self.consumer_armed = true;
+                return;
+            }
+        }
         if id == 0 {
             if let Ok((cmd, target)) = NmtCommand::parse(frame) {
                 if target == 0 || target == self.node {
@@ -345,8 +443,17 @@ impl MockDrive {
 
     /// Advances to `now_ns`: boot-up, motor, heartbeat, TPDO.
     pub fn poll(&mut self, now_ns: u64, out: &mut Vec<CanFrame>) {
+        self.now_ns = now_ns;
         if !self.booted {
             self.boot(out);
+        }
+        if let (true, Some((_, time_ms)), Some(last)) =
+            (self.consumer_armed, self.consumer(), self.stats.last_host_heartbeat_ns)
+        {
+            let silent_ns = now_ns.saturating_sub(last);
+            if silent_ns > u64::from(time_ms) * 1_000_000 {
+                self.host_lost(silent_ns as f64 * 1e-6, out);
+            }
         }
         let dt = self.last_step_ns.map(|t| now_ns.saturating_sub(t) as f64 * 1e-9).unwrap_or(0.0);
         self.last_step_ns = Some(now_ns);
@@ -357,6 +464,7 @@ impl MockDrive {
         // Quick stop and disabled states brake (a drive decelerates on its quick-stop ramp).
         let v = self.motor.step(target, dt);
         self.set(object::VELOCITY_ACTUAL, v.round() as i32 as u32);
+        self.stats.actual_velocity = v.round() as i32;
 
         let hb_ms = u64::from(self.get(object::HEARTBEAT_PRODUCER));
         if hb_ms > 0 && now_ns >= self.next_heartbeat_ns {
@@ -384,7 +492,7 @@ mod tests {
 
     fn sdo(d: &mut MockDrive, req: SdoRequest) -> Option<SdoResponse> {
         let mut out = Vec::new();
-        d.on_frame(&req.to_frame(d.node()).ok()?, &mut out);
+        d.on_frame(&req.to_frame(d.node()).ok()?, 0, &mut out);
         out.iter().find_map(|f| SdoResponse::parse(f).ok()).map(|(_, r)| r)
     }
 
@@ -428,10 +536,10 @@ mod tests {
         }
         assert_eq!(d.state(), DriveState::OperationEnabled);
         let mut out = Vec::new();
-        d.on_frame(&NmtCommand::Start.to_frame(2).unwrap_or_else(|e| panic!("{e}")), &mut out);
+        d.on_frame(&NmtCommand::Start.to_frame(2).unwrap_or_else(|e| panic!("{e}")), 0, &mut out);
         let rpdo =
             VelocityCommand { controlword: 0x0F, target_velocity: 100 }.to_frame(2).unwrap_or_else(|e| panic!("{e}"));
-        d.on_frame(&rpdo, &mut out);
+        d.on_frame(&rpdo, 0, &mut out);
         for ms in 1..=500u64 {
             d.poll(ms * 1_000_000, &mut out);
         }
@@ -448,5 +556,100 @@ mod tests {
         assert_eq!(out.first().and_then(|f| Emergency::parse(f).ok()).map(|e| e.code), Some(0x2310));
         sdo(&mut d, SdoRequest::Download { at: a(0x6040, 0), value: Value::u16(0x80) });
         assert_eq!(d.state(), DriveState::SwitchOnDisabled);
+    }
+
+    /// A drive brought up as the host does it (consumer heartbeat of node 127 at `consumer_ms`
+    /// when given, 0x6007 = 3), enabled, started and driving at 300 units; the host heartbeat
+    /// every 50 ms until `silent_from_ms`, the drive polled every millisecond up to `until_ms`.
+    fn host_goes_silent(consumer_ms: Option<u16>, silent_from_ms: u64, until_ms: u64) -> (MockDrive, Vec<CanFrame>) {
+        let mut d = MockDrive::new(5, 0.05);
+        d.poll(0, &mut Vec::new()); // boot-up first, as on a real bus
+        let a = Address::new;
+        let mut writes =
+            vec![(a(0x6060, 0), Value::i8(3)), (a(0x1800, 5), Value::u16(10)), (a(0x6007, 0), Value::i16(3))];
+        if let Some(ms) = consumer_ms {
+            writes.push((a(0x1016, 1), Value::u32(starc_base::cia402::nmt::consumer_heartbeat_entry(127, ms))));
+        }
+        for (at, value) in writes {
+            assert_eq!(sdo(&mut d, SdoRequest::Download { at, value }), Some(SdoResponse::Downloaded { at }));
+        }
+        for cw in [6u16, 7, 0x0F] {
+            sdo(&mut d, SdoRequest::Download { at: a(0x6040, 0), value: Value::u16(cw) });
+        }
+        let mut out = Vec::new();
+        let frame = |r: starc_base::Result<CanFrame>| r.unwrap_or_else(|e| panic!("{e}"));
+        d.on_frame(&frame(NmtCommand::Start.to_frame(5)), 0, &mut out);
+        d.on_frame(&frame(VelocityCommand { controlword: 0x0F, target_velocity: 300 }.to_frame(5)), 0, &mut out);
+        let host_beat = frame(heartbeat_frame(127, NmtState::Operational));
+        for ms in 0..=until_ms {
+            let now = ms * 1_000_000;
+            if ms < silent_from_ms && ms % 50 == 0 {
+                d.on_frame(&host_beat, now, &mut out);
+            }
+            d.poll(now, &mut out);
+        }
+        (d, out)
+    }
+
+    #[test]
+    fn a_drive_quick_stops_within_200_ms_of_the_last_host_heartbeat() {
+        let (d, out) = host_goes_silent(Some(150), 1001, 1600);
+        let s = d.stats;
+        // Driving until the host fell silent: 21 heartbeats (0..=1000 ms), no false trip.
+        assert_eq!((s.host_heartbeats, s.last_host_heartbeat_ns), (21, Some(1_000_000_000)), "{s:?}");
+        assert_eq!(s.consumer_timeouts, 1, "{s:?}");
+        assert_eq!(d.state(), DriveState::QuickStopActive);
+        let last = s.last_host_heartbeat_ns.unwrap_or(0);
+        let stopped = s.left_enabled_ns.unwrap_or(u64::MAX);
+        let after_ms = stopped.saturating_sub(last) as f64 * 1e-6;
+        assert!(after_ms > 150.0 && after_ms <= 200.0, "stopped {after_ms} ms after the last heartbeat");
+        assert_eq!(s.heartbeat_lost_ns, Some(stopped));
+        // EMCY 0x8130 (heartbeat error), the target zeroed, and the motor braked to a stop.
+        assert!(out.iter().filter_map(|f| Emergency::parse(f).ok()).any(|e| e.node == 5 && e.code == 0x8130));
+        assert_eq!(d.get(object::TARGET_VELOCITY), 0);
+        assert!(d.velocity().abs() < 1.0, "still turning at {}", d.velocity());
+        let last_tpdo = out.iter().rev().find_map(|f| VelocityStatus::parse(f).ok()).map(|(_, s)| s);
+        assert!(
+            last_tpdo.is_some_and(|t| DriveState::from_statusword(t.statusword) == Some(DriveState::QuickStopActive)),
+            "{last_tpdo:?}"
+        );
+    }
+
+    #[test]
+    fn without_a_consumer_heartbeat_the_drive_runs_on_when_the_host_dies() {
+        // The failure the host's bring-up exists for: nothing stops this one.
+        let (d, _) = host_goes_silent(None, 1001, 1600);
+        assert_eq!(d.state(), DriveState::OperationEnabled);
+        assert_eq!(d.stats.consumer_timeouts, 0);
+        assert!(d.velocity() > 290.0, "{}", d.velocity());
+    }
+
+    #[test]
+    fn monitoring_starts_with_the_first_heartbeat_and_each_option_acts() {
+        // Never a heartbeat: the consumer does not start (CiA 301), the drive keeps running.
+        let (d, _) = host_goes_silent(Some(150), 0, 500);
+        assert_eq!((d.state(), d.stats.consumer_timeouts), (DriveState::OperationEnabled, 0));
+        // 0x6007 = 2 and 1: disable voltage, fault.
+        for (option, want) in [(2i16, DriveState::SwitchOnDisabled), (1, DriveState::Fault)] {
+            let mut d = MockDrive::new(6, 0.05);
+            d.poll(0, &mut Vec::new());
+            let a = Address::new;
+            for (at, value) in [
+                (a(0x6007, 0), Value::i16(option)),
+                (a(0x1016, 1), Value::u32(starc_base::cia402::nmt::consumer_heartbeat_entry(127, 100))),
+            ] {
+                sdo(&mut d, SdoRequest::Download { at, value });
+            }
+            for cw in [6u16, 7, 0x0F] {
+                sdo(&mut d, SdoRequest::Download { at: a(0x6040, 0), value: Value::u16(cw) });
+            }
+            let mut out = Vec::new();
+            let beat = heartbeat_frame(127, NmtState::Operational).unwrap_or_else(|e| panic!("{e}"));
+            d.on_frame(&beat, 0, &mut out);
+            for ms in 0..=150u64 {
+                d.poll(ms * 1_000_000, &mut out);
+            }
+            assert_eq!(d.state(), want, "option {option}");
+        }
     }
 }

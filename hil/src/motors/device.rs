@@ -98,7 +98,7 @@ impl MotorsDevice {
             to_host.extend_from_slice(&replies);
         }
         for f in frames {
-            self.deliver(&f);
+            self.deliver(&f, now_ns);
         }
         self.flush_bus(now_ns, to_host);
     }
@@ -133,10 +133,10 @@ impl MotorsDevice {
     }
 
     /// A frame from the host onto the bus: every controller sees it and may answer.
-    fn deliver(&mut self, frame: &CanFrame) {
+    fn deliver(&mut self, frame: &CanFrame, now_ns: u64) {
         match &mut self.controllers {
             Controllers::C620(c) => c.on_frame(frame),
-            Controllers::Cia402(drives) => drives.iter_mut().for_each(|d| d.on_frame(frame, &mut self.bus)),
+            Controllers::Cia402(drives) => drives.iter_mut().for_each(|d| d.on_frame(frame, now_ns, &mut self.bus)),
         }
     }
 

@@ -18,7 +18,7 @@ use crate::motors::pty::PtyDevice;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Duration;
-use tokio::sync::oneshot;
+use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::{Instant, MissedTickBehavior};
 
@@ -79,6 +79,7 @@ impl MockMotorsConfig {
 /// A running mock.
 pub struct MockMotors {
     stop: Option<oneshot::Sender<()>>,
+    live: watch::Receiver<MotorsStats>,
     task: JoinHandle<Result<MotorsStats>>,
     port: PathBuf,
 }
@@ -104,12 +105,19 @@ impl MockMotors {
             faults: config.faults.clone(),
         };
         let (stop_tx, stop_rx) = oneshot::channel();
-        let task = tokio::spawn(run(pty, MotorsDevice::new(&settings), stop_rx));
-        Ok(Self { stop: Some(stop_tx), task, port: config.port })
+        let device = MotorsDevice::new(&settings);
+        let (live_tx, live) = watch::channel(device.stats());
+        let task = tokio::spawn(run(pty, device, stop_rx, live_tx));
+        Ok(Self { stop: Some(stop_tx), live, task, port: config.port })
     }
 
     pub fn port(&self) -> &std::path::Path {
         &self.port
+    }
+
+    /// The counters as of the last 10 ms, while the mock runs (drive states, host heartbeats).
+    pub fn stats_now(&self) -> MotorsStats {
+        self.live.borrow().clone()
     }
 
     /// Stops the mock, removes the link, returns the counters.
@@ -127,7 +135,12 @@ impl Drop for MockMotors {
     }
 }
 
-async fn run(pty: PtyDevice, mut device: MotorsDevice, mut stop: oneshot::Receiver<()>) -> Result<MotorsStats> {
+async fn run(
+    pty: PtyDevice,
+    mut device: MotorsDevice,
+    mut stop: oneshot::Receiver<()>,
+    live: watch::Sender<MotorsStats>,
+) -> Result<MotorsStats> {
     let start = Instant::now();
     let now_ns = || u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
     let mut tick = tokio::time::interval(Duration::from_millis(1));
@@ -135,6 +148,7 @@ async fn run(pty: PtyDevice, mut device: MotorsDevice, mut stop: oneshot::Receiv
     let mut buf = vec![0u8; 4096];
     let mut out = Vec::with_capacity(4096);
     let mut overflow = 0u64;
+    let mut ticks = 0u64;
     loop {
         tokio::select! {
             biased;
@@ -143,7 +157,13 @@ async fn run(pty: PtyDevice, mut device: MotorsDevice, mut stop: oneshot::Receiv
                 let n = read?;
                 device.on_host_bytes(buf.get(..n).unwrap_or(&[]), now_ns(), &mut out);
             }
-            _ = tick.tick() => device.poll(now_ns(), &mut out),
+            _ = tick.tick() => {
+                device.poll(now_ns(), &mut out);
+                ticks += 1;
+                if ticks.is_multiple_of(10) {
+                    live.send_replace(device.stats());
+                }
+            }
         }
         if !out.is_empty() {
             overflow += pty.write_now(&out) as u64;

@@ -166,7 +166,16 @@ impl C620Group {
                     w.pi = Pi::default();
                     0.0
                 }
-                (_, true, Some(measured)) => w.pi.step(&self.config, target - measured, dt_s),
+                // No fresh command (the watchdog): only current that opposes the wheel's motion,
+                // proportional to it, so it falls to zero as the wheel stops. The integral is
+                // dropped: wound up while driving (or against a blocked wheel) it would go on
+                // pushing with nobody commanding.
+                (DriveMode::Brake, true, Some(measured)) => {
+                    w.pi = Pi::default();
+                    let max = self.config.max_current_a;
+                    (-self.config.kp_a_per_rad_s * measured).clamp(-max, max)
+                }
+                (DriveMode::Run, true, Some(measured)) => w.pi.step(&self.config, target - measured, dt_s),
             };
             w.state.target_rad_s = target;
             w.state.phase = if w.timed_out {
@@ -291,6 +300,35 @@ mod tests {
         g.clear();
         g.tick(at_ms(180), DriveMode::Run, &[1.0, 1.0], &mut out, &mut faults);
         assert_eq!(faults.len(), 2, "fires again after a clear while still silent");
+        Ok(())
+    }
+
+    #[test]
+    fn without_a_fresh_command_only_braking_current_is_sent() -> Result<()> {
+        let mut g = C620Group::new(C620Config::default(), &[(1, false), (2, true)], 100)?;
+        let (mut out, mut faults) = (Vec::new(), Vec::new());
+        let currents = |out: &[CanFrame]| out.last().and_then(|f| CurrentCommand::parse(f).ok()).map(|c| c.raw);
+        // Driving against wheels that do not turn (blocked): the integral winds up.
+        for t in 0..50 {
+            g.handle_frame(&feedback(1, 0), at_ms(t * 10));
+            g.handle_frame(&feedback(2, 0), at_ms(t * 10));
+            g.tick(at_ms(t * 10), DriveMode::Run, &[5.0, 5.0], &mut out, &mut faults);
+        }
+        let driving = currents(&out).unwrap_or_default();
+        assert!(driving[0] > 0 && driving[1] < 0, "{driving:?}");
+        // The watchdog fired (Brake): standing wheels get no current at all, wound-up integral
+        // or not.
+        g.handle_frame(&feedback(1, 0), at_ms(500));
+        g.handle_frame(&feedback(2, 0), at_ms(500));
+        g.tick(at_ms(500), DriveMode::Brake, &[5.0, 5.0], &mut out, &mut faults);
+        assert_eq!(currents(&out), Some([0, 0, 0, 0]));
+        // Turning wheels get current against their motion only (ESC 2 inverted).
+        g.handle_frame(&feedback(1, 2000), at_ms(510));
+        g.handle_frame(&feedback(2, 2000), at_ms(510));
+        g.tick(at_ms(510), DriveMode::Brake, &[5.0, 5.0], &mut out, &mut faults);
+        let braking = currents(&out).unwrap_or_default();
+        assert!(braking[0] < 0 && braking[1] < 0, "{braking:?}");
+        assert!(faults.is_empty(), "{faults:?}");
         Ok(())
     }
 

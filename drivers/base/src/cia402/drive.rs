@@ -14,10 +14,27 @@ pub mod object {
     pub const DEVICE_TYPE: u16 = 0x1000;
     pub const ERROR_REGISTER: u16 = 0x1001;
     pub const HEARTBEAT_PRODUCER: u16 = 0x1017;
+    /// Consumer heartbeat time (CiA 301): sub 1.. = node id << 16 | time in ms.
+    pub const CONSUMER_HEARTBEAT: u16 = 0x1016;
+    /// Abort connection option code (CiA 402, INTEGER16): what the drive does when the
+    /// connection to the host is lost (heartbeat consumer time-out, bus-off, NMT stop...).
+    pub const ABORT_CONNECTION_OPTION: u16 = 0x6007;
     pub const RPDO1_COMM: u16 = 0x1400;
     pub const RPDO1_MAP: u16 = 0x1600;
     pub const TPDO1_COMM: u16 = 0x1800;
     pub const TPDO1_MAP: u16 = 0x1A00;
+}
+
+/// Values of 0x6007, the abort connection option code (CiA 402; negative values are
+/// manufacturer-specific).
+pub mod abort_connection {
+    pub const NO_ACTION: i16 = 0;
+    /// Fault signal: the drive goes through Fault Reaction Active to Fault.
+    pub const FAULT: i16 = 1;
+    /// Disable voltage command: the power stage is switched off and the motor coasts.
+    pub const DISABLE_VOLTAGE: i16 = 2;
+    /// Quick stop command: the drive brakes on its quick-stop ramp.
+    pub const QUICK_STOP: i16 = 3;
 }
 
 /// Profile velocity mode (0x6060 = 3).

@@ -1,15 +1,17 @@
 //! One CiA 402 drive seen from the host, sans-IO: frames and time in, frames and faults out.
 //!
-//! Bring-up: NMT pre-operational; heartbeat producer time (0x1017); optionally the PDO mapping
+//! Bring-up: NMT pre-operational; heartbeat producer time (0x1017); the consumer heartbeat time
+//! of the host's heartbeat (0x1016:01) and the abort connection option (0x6007), so that the
+//! drive stops by itself when the host goes silent; optionally the PDO mapping
 //! (RPDO1 = controlword + target velocity, TPDO1 = statusword + actual velocity, event-timer
 //! driven); 0x6060 = 3 (profile velocity) checked in 0x6061; target velocity 0; fault reset and
 //! disable voltage, and the enable sequence 6 / 7 / 0x0F with the statusword read back after
 //! each step; NMT start.
 //! Then RPDO1 every control period, TPDO1 and heartbeats watched, EMCY decoded.
 
-use crate::cia402::drive::{controlword, object, DriveState, PROFILE_VELOCITY_MODE};
+use crate::cia402::drive::{abort_connection, controlword, object, DriveState, PROFILE_VELOCITY_MODE};
 use crate::cia402::emcy::Emergency;
-use crate::cia402::nmt::{parse_heartbeat, NmtCommand, NmtState};
+use crate::cia402::nmt::{consumer_heartbeat_entry, parse_heartbeat, NmtCommand, NmtState};
 use crate::cia402::pdo::{VelocityCommand, VelocityStatus, RPDO1_BASE, RPDO1_MAPPING, TPDO1_BASE, TPDO1_MAPPING};
 use crate::cia402::sdo::{abort_meaning, Address, SdoRequest, SdoResponse, Value};
 use crate::motor::{elapsed_ms, MotorPhase, WheelState};
@@ -38,6 +40,18 @@ pub struct Cia402Config {
     pub configure_pdos: bool,
     /// TPDO1 event timer written to 0x1800:05.
     pub tpdo_period_ms: u16,
+    /// The host's own CANopen node id: its heartbeat goes out on 0x700 + this id. Must not be
+    /// a wheel's node id.
+    pub host_node_id: u8,
+    /// How often the host sends its heartbeat (producer time).
+    pub host_heartbeat_ms: u16,
+    /// Written to each drive's 0x1016:01: the drive acts on 0x6007 when the host's heartbeat is
+    /// silent this long. Longer than `host_heartbeat_ms` (two periods and more rides out a late
+    /// or lost heartbeat); it bounds how long a drive runs on after the host dies.
+    pub consumer_heartbeat_ms: u16,
+    /// Written to each drive's 0x6007: 1 fault, 2 disable voltage (coast), 3 quick stop (brake
+    /// on the quick-stop ramp), negative: the manufacturer's. 0 (no action) is refused.
+    pub abort_connection_option: i16,
 }
 
 impl Default for Cia402Config {
@@ -51,6 +65,12 @@ impl Default for Cia402Config {
             state_timeout_ms: 500,
             configure_pdos: true,
             tpdo_period_ms: 10,
+            host_node_id: 127,
+            // 50 / 150 ms: a drive stops within 150 ms (plus its own reaction) of the host's last
+            // heartbeat, inside the 200 ms budget, and two heartbeats may be late or lost first.
+            host_heartbeat_ms: 50,
+            consumer_heartbeat_ms: 150,
+            abort_connection_option: abort_connection::QUICK_STOP,
         }
     }
 }
@@ -68,6 +88,21 @@ impl Cia402Config {
         }
         if self.sdo_timeout_ms == 0 || self.tpdo_period_ms == 0 {
             return Err(crate::BaseError::config("motors.cia402", "sdo_timeout_ms and tpdo_period_ms must be > 0"));
+        }
+        if !(1..=127).contains(&self.host_node_id) {
+            return Err(crate::BaseError::config("motors.cia402.host_node_id", "must be 1-127"));
+        }
+        if self.host_heartbeat_ms == 0 || self.consumer_heartbeat_ms <= self.host_heartbeat_ms {
+            return Err(crate::BaseError::config(
+                "motors.cia402.consumer_heartbeat_ms",
+                "must be longer than a non-zero host_heartbeat_ms",
+            ));
+        }
+        if self.abort_connection_option == abort_connection::NO_ACTION {
+            return Err(crate::BaseError::config(
+                "motors.cia402.abort_connection_option",
+                "0 (no action) would leave a drive running when the host dies; use 3 (quick stop)",
+            ));
         }
         Ok(())
     }
@@ -87,6 +122,12 @@ fn setup_steps(node: u8, c: &Cia402Config) -> Vec<Step> {
     let mut steps = vec![
         Step::Nmt(NmtCommand::EnterPreOperational),
         Step::Write(a(object::HEARTBEAT_PRODUCER, 0), Value::u16(c.heartbeat_ms)),
+        // Before anything can enable the drive: from here on a silent host stops it.
+        Step::Write(
+            a(object::CONSUMER_HEARTBEAT, 1),
+            Value::u32(consumer_heartbeat_entry(c.host_node_id, c.consumer_heartbeat_ms)),
+        ),
+        Step::Write(a(object::ABORT_CONNECTION_OPTION, 0), Value::i16(c.abort_connection_option)),
     ];
     if c.configure_pdos {
         let rpdo_cob = u32::from(RPDO1_BASE) + u32::from(node);

@@ -51,6 +51,9 @@ impl Value {
     pub fn i8(v: i8) -> Self {
         Self { raw: u32::from(v as u8), size: 1 }
     }
+    pub fn i16(v: i16) -> Self {
+        Self { raw: u32::from(v as u16), size: 2 }
+    }
     pub fn i32(v: i32) -> Self {
         Self { raw: v as u32, size: 4 }
     }

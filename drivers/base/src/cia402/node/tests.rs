@@ -179,3 +179,75 @@ fn emcy_and_a_faulted_statusword_stop_the_node() {
     run(&mut n, &mut d, 200, 20, &mut faults);
     assert!(matches!(faults.first(), Some(Fault::DriveFault { node: 8, .. })), "{faults:?}");
 }
+
+#[test]
+fn bring_up_arms_the_consumer_heartbeat_and_the_abort_option_before_enabling() {
+    let config = Cia402Config { host_node_id: 100, consumer_heartbeat_ms: 150, ..Cia402Config::default() };
+    let mut n = Cia402Node::new(0, 3, false, config, 100);
+    let mut d = drive(3);
+    let mut faults = Vec::new();
+    n.start(at_ms(0));
+    let sent = run(&mut n, &mut d, 0, 200, &mut faults);
+    assert!(faults.is_empty() && n.is_running(), "{faults:?}");
+    let writes: Vec<(Address, Value)> = sent
+        .iter()
+        .filter_map(|f| match SdoRequest::parse(f) {
+            Ok((3, SdoRequest::Download { at, value })) => Some((at, value)),
+            _ => None,
+        })
+        .collect();
+    let position = |index: u16, sub: u8| writes.iter().position(|(at, _)| *at == Address::new(index, sub));
+    let consumer = position(object::CONSUMER_HEARTBEAT, 1).unwrap_or_else(|| panic!("no 0x1016:01 write"));
+    let option = position(object::ABORT_CONNECTION_OPTION, 0).unwrap_or_else(|| panic!("no 0x6007 write"));
+    // Host node 100 (0x64) in bits 23-16, 150 ms (0x96) in bits 15-0, a 32-bit value.
+    assert_eq!(writes.get(consumer).map(|w| w.1), Some(Value::u32(0x0064_0096)));
+    // Quick stop (3), a 16-bit signed value.
+    assert_eq!(writes.get(option).map(|w| w.1), Some(Value::i16(3)));
+    assert_eq!(
+        sent.iter()
+            .filter_map(|f| SdoRequest::parse(f).ok())
+            .filter(
+                |(_, r)| matches!(r, SdoRequest::Download { at, .. } if at.index == object::ABORT_CONNECTION_OPTION)
+            )
+            .count(),
+        1
+    );
+    // Both before the drive can be enabled (the first controlword) or started (NMT start).
+    let first_cw = position(object::CONTROLWORD, 0).unwrap_or(usize::MAX);
+    assert!(consumer < first_cw && option < first_cw, "{writes:?}");
+    let nmt_start = sent.iter().position(|f| f.to_string() == "000#0103").unwrap_or(0);
+    let consumer_frame = sent
+        .iter()
+        .position(|f| matches!(SdoRequest::parse(f), Ok((_, SdoRequest::Download { at, .. })) if at.index == object::CONSUMER_HEARTBEAT))
+        .unwrap_or(usize::MAX);
+    assert!(consumer_frame < nmt_start);
+}
+
+#[test]
+fn a_drive_without_a_consumer_heartbeat_is_never_enabled() {
+    let mut n = Cia402Node::new(0, 4, false, Cia402Config::default(), 100);
+    let mut d = Drive { refuse: Some(Address::new(object::CONSUMER_HEARTBEAT, 1)), ..drive(4) };
+    let mut faults = Vec::new();
+    n.start(at_ms(0));
+    let sent = run(&mut n, &mut d, 0, 200, &mut faults);
+    let text = faults.first().map(|f| f.to_string()).unwrap_or_default();
+    assert!(text.contains("0x1016:01"), "{faults:?}");
+    assert!(!n.is_running());
+    assert!(!sent.iter().any(|f| f.to_string() == "000#0104"), "NMT start sent");
+    assert_ne!(d.state, DriveState::OperationEnabled);
+}
+
+#[test]
+fn config_refuses_a_heartbeat_that_cannot_protect() {
+    let ok = Cia402Config::default();
+    assert!(ok.validate().is_ok());
+    for bad in [
+        Cia402Config { consumer_heartbeat_ms: 50, ..ok.clone() },
+        Cia402Config { host_heartbeat_ms: 0, ..ok.clone() },
+        Cia402Config { host_node_id: 0, ..ok.clone() },
+        Cia402Config { host_node_id: 128, ..ok.clone() },
+        Cia402Config { abort_connection_option: 0, ..ok.clone() },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+}
