@@ -23,6 +23,8 @@ pub enum Start {
     FromTruth { hint_m: f64, hint_deg: f64 },
     /// A pose in the robot's map (fpv.toml's `expected_start`).
     At(Isometry3<f64>),
+    /// No hint: the responder may start anywhere the robot has mapped (the scored setting).
+    Anywhere,
 }
 
 /// One offline run of both sides.
@@ -144,7 +146,7 @@ impl Run {
                 mission.rig_mut().core_mut().set_start_hint(p);
                 true
             }
-            Start::FromTruth { .. } => false,
+            Start::FromTruth { .. } | Start::Anywhere => false,
         };
         Ok(Self {
             score: cfg.truth.take().map(Scorer::new),
@@ -200,7 +202,7 @@ impl Run {
                 self.seed_from_truth();
             }
             MissionEvent::Alignment { end_ns, world_t_lidar, total_ms, verdict } => {
-                tracing::info!(?verdict, "rig alignment");
+                tracing::info!(%verdict, "rig alignment");
                 let accepted = matches!(verdict, AlignVerdict::Accepted { .. });
                 let first_ns = self.mission.rig().core().first_ns().unwrap_or(end_ns);
                 if accepted && self.first_accept_ns.is_none() {

@@ -93,7 +93,9 @@ pub async fn run(
 ) -> Result<FpvSummary> {
     cfg.validate()?;
     let mut side = RigSide::new(side_config(&cfg)?)?;
-    side.core_mut().set_start_hint(cfg.expected_start.map_or_else(Isometry3::identity, |s| s.isometry()));
+    if let Some(start) = cfg.expected_start {
+        side.core_mut().set_start_hint(start.isometry());
+    }
     if cfg.no_start_gate() {
         tracing::info!("no start gate: the first alignment is taken wherever it lands");
     }
@@ -220,7 +222,7 @@ impl RigNode {
         let report = outcome.as_ref().ok().map(|o| (o.end_ns, o.world_t_lidar, o.report.total_ms));
         let verdict = self.side.apply(outcome);
         self.summary.alignments += 1;
-        tracing::info!(?verdict, "rig alignment");
+        tracing::info!(%verdict, "rig alignment");
         if matches!(verdict, AlignVerdict::Accepted { .. }) {
             self.summary.accepted += 1;
         }

@@ -193,7 +193,7 @@ fn main() {
                 event = format!("accepted, {outcome:?} ({:.1} cm {:.2} deg off the truth)", e_m * 100.0, e_deg);
             } else {
                 rejected += 1;
-                event = format!("rejected: {}", report.failure.unwrap_or_default());
+                event = format!("rejected: {}", report.failure.map_or_else(String::new, |f| f.to_string()));
                 println!("  t {:.1} s: {event}", (now - sim.robot_truth[0].0) as f64 * 1e-9);
             }
             next_registration = now + period_ns;

@@ -23,7 +23,9 @@
 mod align_sim;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use starc_pipeline::align::{cloud_points, pose_error, pose_from_rows, pose_rows, AlignConfig, Aligner, Ray, Vec3};
+use starc_pipeline::align::{
+    cloud_points, pose_error, pose_from_rows, pose_rows, AlignConfig, Aligner, Ray, Rejection, Vec3,
+};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -224,7 +226,10 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
             split_ms[1].push(r.seed_ms);
             split_ms[2].push(r.attempts.iter().map(|a| a.ndt_ms + a.icp_ms).sum());
             split_ms[3].push(r.attempts.iter().map(|a| a.verify_ms).sum());
-            if r.attempts.iter().any(|a| a.rejected_because.iter().any(|w| w.starts_with("sees through"))) {
+            if r.attempts
+                .iter()
+                .any(|a| a.rejected_because.iter().any(|w| matches!(w, Rejection::SeesThroughMap { .. })))
+            {
                 rejected_free_space += 1;
             }
             let (err_m, err_deg) = pose_error(&r.pose, truth);

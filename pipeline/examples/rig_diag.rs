@@ -6,17 +6,14 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use starc_bridge::wheels::{read_wheel_log, with_wheels, MotorFeedback, WheelFeedback};
+use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
+use starc_hil::sim::scenario::{MotorProtocol, Scenario};
 use starc_hil::tum::{pose_at, read_tum};
-use starc_pipeline::align::{pose_error, AlignConfig, Attempt};
-use starc_pipeline::lio::{ImuSample, LioScan};
-use starc_pipeline::mission::{RigCore, RigCoreConfig, RobotCore, RobotCoreConfig};
-use std::net::Ipv4Addr;
+use starc_pipeline::align::SeedOrigin;
+use starc_pipeline::align::{pose_error, AlignConfig, Attempt, Reasons};
+use starc_pipeline::mission::{MissionInput, RigCore, RigCoreConfig, RobotCore, RobotCoreConfig, Side};
 use std::path::PathBuf;
-
-enum Ev {
-    Imu(bool, ImuSample),
-    Scan(bool, LioScan),
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -26,15 +23,21 @@ fn main() {
     let gate_m: f64 = std::env::var("GATE_M").map_or(2.0, |v| v.parse().unwrap());
     let gt_robot = read_tum(&dir.join("gt_robot.tum")).unwrap();
     let gt_fpv = read_tum(&dir.join("gt_fpv.tum")).unwrap();
+    let no_hint = std::env::var("NO_HINT").is_ok();
     let pcap = dir.join("avia.pcap");
-    let robot = starc_bridge::decode_avia(&pcap, Ipv4Addr::new(192, 168, 1, 101)).unwrap();
-    let rig = starc_bridge::decode_avia(&pcap, Ipv4Addr::new(192, 168, 2, 102)).unwrap();
-    let mut evs: Vec<(u64, Ev)> = Vec::new();
-    evs.extend(robot.imu.into_iter().map(|s| (s.t_ns, Ev::Imu(true, s))));
-    evs.extend(robot.scans.into_iter().map(|s| (s.end_ns, Ev::Scan(true, s))));
-    evs.extend(rig.imu.into_iter().map(|s| (s.t_ns, Ev::Imu(false, s))));
-    evs.extend(rig.scans.into_iter().map(|s| (s.end_ns, Ev::Scan(false, s))));
-    evs.sort_by_key(|e| e.0);
+    let mut inputs = starc_bridge::from_capture(&pcap, ROBOT_AVIA_IP, FPV_AVIA_IP).unwrap();
+    // The base's wheels, as `starc mission` fuses them (the scenario's layout and motors).
+    if let Ok((scenario, _)) = Scenario::load(&dir.join("scenario.toml").to_string_lossy()) {
+        let robot = scenario.robot.get_ref();
+        let motors = match robot.motors {
+            MotorProtocol::C620 => MotorFeedback::C620,
+            MotorProtocol::Cia402 => MotorFeedback::Cia402,
+        };
+        let base = WheelFeedback::plain(starc_hil::sim::wheels::default_geometry(robot.wheels), motors);
+        if let Ok(w) = read_wheel_log(&dir.join("robot_can.log"), &base, 0) {
+            inputs = with_wheels(inputs, w);
+        }
+    }
 
     let mut rc = RobotCore::new(RobotCoreConfig::default()).unwrap();
     let max_window_s: f64 = std::env::var("MAX_WINDOW_S").map_or(10.0, |v| v.parse().unwrap());
@@ -48,12 +51,13 @@ fn main() {
     let mut lio_t_world: Option<Isometry3<f64>> = None;
     let mut odom: Vec<(u64, Isometry3<f64>)> = Vec::new();
     let mut hint_set = false;
-    for (_, ev) in evs {
-        match ev {
-            Ev::Imu(true, s) => rc.push_imu(s, &mut rsteps),
-            Ev::Scan(true, s) => rc.push_scan(s, &mut rsteps),
-            Ev::Imu(false, s) => core.push_imu(s, &mut routs),
-            Ev::Scan(false, s) => core.push_scan(s, &mut routs),
+    for input in inputs {
+        match input.unwrap() {
+            MissionInput::Imu(Side::Robot, s) => rc.push_imu(s, &mut rsteps),
+            MissionInput::Scan(Side::Robot, s) => rc.push_scan(s, &mut rsteps),
+            MissionInput::Wheel(_, s) => rc.push_wheel(s),
+            MissionInput::Imu(Side::Rig, s) => core.push_imu(s, &mut routs),
+            MissionInput::Scan(Side::Rig, s) => core.push_scan(s, &mut routs),
         }
         for st in rsteps.drain(..) {
             if lio_t_world.is_none() {
@@ -63,7 +67,7 @@ fn main() {
         for o in routs.drain(..) {
             odom.push((o.end_ns, o.lidar_pose));
             let (Some(first), Some(l_t_w)) = (core.first_ns(), lio_t_world) else { continue };
-            if !hint_set {
+            if !hint_set && !no_hint {
                 let off = Isometry3::from_parts(
                     Translation3::new(0.8 * hint_m, -0.6 * hint_m, 0.0),
                     UnitQuaternion::from_euler_angles(0.0, 0.0, hint_deg.to_radians()),
@@ -84,7 +88,7 @@ fn main() {
             let o_first = odom.first().map(|p| p.1).unwrap();
             let o_end = odom.iter().rev().find(|p| p.0 <= end).map(|p| p.1).unwrap();
             let start_of = |w: &Isometry3<f64>| w * o_end.inverse() * o_first;
-            let hint = *core.start_hint();
+            let hint = core.start_hint().copied().unwrap_or_else(Isometry3::identity);
             let true_xy = truth.translation.vector;
             println!(
                 "== t {:5.1} s (truth x {:6.2} y {:5.2}) tracking {} {} source pts, {} seeds, {:.0} ms",
@@ -112,7 +116,7 @@ fn main() {
                     off_now,
                     off_start,
                     a.accepted,
-                    a.rejected_because.join("; ")
+                    Reasons(&a.rejected_because)
                 );
                 for p in &a.alternatives {
                     println!(
@@ -144,6 +148,18 @@ fn main() {
                     best
                 );
             }
+            let global: Vec<_> = o
+                .report
+                .seeds
+                .iter()
+                .enumerate()
+                .filter(|(_, s)| matches!(s.origin, SeedOrigin::Global { .. }))
+                .map(|(i, s)| {
+                    let (m, d) = pose_error(&s.pose, &truth_frame);
+                    format!("#{i} {m:.1}m/{d:.0}deg {:?} {:.3}", s.origin, s.score)
+                })
+                .collect();
+            println!("  global seeds (rank, off truth, votes, score): {}", global.join(" | "));
             // One attempt from the truth: NDT 1 m then ICP, the same acceptance and consistency check.
             let cfg = AlignConfig {
                 reseed_yaw_step_deg: 0.0,
@@ -162,10 +178,24 @@ fn main() {
                     fit(a),
                     a.verify_hops,
                     a.accepted,
-                    a.rejected_because.join("; ")
+                    Reasons(&a.rejected_because)
                 );
             }
             let (chosen_m, chosen_deg) = pose_error(&o.world_t_lidar, &truth);
+            if std::env::var("NEVER_APPLY").is_ok() {
+                // Every job a first alignment: how the global search's answers vary over time.
+                let w_t_o = o.world_t_lidar * o.odom_t_lidar.inverse();
+                println!(
+                    "  SUMMARY t {t_s:5.1} acc {} err {chosen_m:6.2} m {chosen_deg:6.1} deg world_t_odom {:+7.2} {:+7.2} {:+7.1}",
+                    o.report.accepted,
+                    w_t_o.translation.x,
+                    w_t_o.translation.y,
+                    w_t_o.rotation.euler_angles().2.to_degrees()
+                );
+                let _ =
+                    core.apply(Err(starc_pipeline::PipelineError::BadFile { format: "diag", reason: String::new() }));
+                continue;
+            }
             let verdict = core.apply(Ok(o));
             println!("  verdict {verdict:?} (chosen {chosen_m:.2} m {chosen_deg:.1} deg off truth)");
         }

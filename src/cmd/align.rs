@@ -122,7 +122,7 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
             )?;
         }
         if !a.rejected_because.is_empty() {
-            writeln!(out, "rejected because: {}", a.rejected_because.join("; "))?;
+            writeln!(out, "rejected because: {}", starc_pipeline::align::Reasons(&a.rejected_because))?;
         }
     }
     if let Some(f) = &report.failure {

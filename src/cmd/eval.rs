@@ -7,7 +7,6 @@
 //! seeded at the world origin with no gate, as a responder who enters anywhere would be.
 
 use anyhow::{bail, Context};
-use nalgebra::Isometry3;
 use starc_eval::batch::{flatten, markdown_table, print_summary, summarize, write_plots, Row};
 use starc_eval::offline::{self, Offline, Start};
 use starc_hil::gen;
@@ -242,7 +241,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
         inputs = starc_bridge::wheels::with_wheels(inputs, super::sim::wheel_samples(dir, robot)?);
     }
     let (start, start_gate_m) = match args.hint {
-        Hint::None => (Start::At(Isometry3::identity()), f64::INFINITY),
+        Hint::None => (Start::Anywhere, f64::INFINITY),
         Hint::Truth => (Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 }, 2.0),
     };
     offline::run(

@@ -31,12 +31,13 @@ pub struct Args {
     /// Write every Nth AR frame as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     pub frames_every: u64,
-    /// How well the responder's start is known (as from a marked entry point or a hand-off next
-    /// to the robot): the first alignment is seeded this far off the rig's true start, in metres
-    /// and degrees; the yaw grid searches around it, and a result farther than `--start-gate-m`
-    /// from it is refused.
-    #[arg(long, default_value_t = 1.0)]
-    pub start_hint_m: f64,
+    /// Give the rig a start hint from the simulator's truth, standing for a marked entry point
+    /// or a hand-off next to the robot: the first alignment is seeded this far off the rig's
+    /// true start, in metres (and `--start-hint-deg` degrees), and a result farther than
+    /// `--start-gate-m` from it is refused. Such a run reads the truth: not a scored figure.
+    /// Without it (the default) the responder may start anywhere the robot has mapped.
+    #[arg(long)]
+    pub start_hint_m: Option<f64>,
     #[arg(long, default_value_t = 20.0)]
     pub start_hint_deg: f64,
     #[arg(long, default_value_t = 2.0)]
@@ -61,7 +62,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames_every: args.frames_every,
         camera: truth.mount.camera.clone(),
         lidar_t_camera: truth.mount.lidar_t_camera,
-        start: Start::FromTruth { hint_m: args.start_hint_m, hint_deg: args.start_hint_deg },
+        start: match args.start_hint_m {
+            Some(hint_m) => Start::FromTruth { hint_m, hint_deg: args.start_hint_deg },
+            None => Start::Anywhere,
+        },
         start_gate_m: args.start_gate_m,
         robot: RobotCoreConfig {
             walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),

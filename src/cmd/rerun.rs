@@ -70,14 +70,13 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
             quaternion_xyzw: [-0.5, 0.5, -0.5, 0.5],
         },
     };
-    let start =
-        cfg.as_ref().and_then(|c| c.expected_start).map_or_else(nalgebra::Isometry3::identity, |s| s.isometry());
+    let start = cfg.as_ref().and_then(|c| c.expected_start).map_or(Start::Anywhere, |s| Start::At(s.isometry()));
     Ok(Offline {
         out,
         frames_every: args.frames_every,
         lidar_t_camera: camera.lidar_t_camera()?,
         camera: camera.model,
-        start: Start::At(start),
+        start,
         start_gate_m: cfg.as_ref().map_or(2.0, |c| c.start_gate_m),
         robot: RobotCoreConfig::default(),
         truth: None,

@@ -126,7 +126,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             dir: args.out.clone(),
             out: None,
             frames_every: args.frames_every,
-            start_hint_m: 1.0,
+            start_hint_m: Some(1.0),
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
             walker_min_height_m: None,

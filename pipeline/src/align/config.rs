@@ -119,6 +119,24 @@ pub struct AlignConfig {
     /// Only seeds whose coarse NDT score reaches this share of the accepted seed's are refined by
     /// the ambiguity check (0: every seed; 1: only seeds scoring at least as well).
     pub ambiguity_score_ratio: f64,
+    /// Global stage of the seed search ([`crate::align::global`]): this many distinct poses
+    /// proposed by descriptor matches over the whole target join the yaw grid's seeds (0: off).
+    /// Both clouds are reduced to `global_voxel_m`; normals come from neighbours within
+    /// `global_normal_radius_m`, descriptors from those within `global_radius_m`; keypoints are
+    /// the points whose curvature (smallest PCA eigenvalue over the sum) is at least
+    /// `global_min_curvature`, at most `global_source_keypoints` / `global_target_keypoints`
+    /// of them; each source keypoint is matched to `global_matches_per_point` target keypoints;
+    /// `global_pair_samples` pairs of matches vote, a match agreeing within `global_inlier_m`.
+    pub global_candidates: usize,
+    pub global_voxel_m: f64,
+    pub global_normal_radius_m: f64,
+    pub global_radius_m: f64,
+    pub global_min_curvature: f64,
+    pub global_source_keypoints: usize,
+    pub global_target_keypoints: usize,
+    pub global_matches_per_point: usize,
+    pub global_pair_samples: usize,
+    pub global_inlier_m: f64,
     /// Free-space check of a result that passed the other tests, when the source comes with its
     /// rays ([`crate::align::Aligner::align_with_rays`]): at most this many rays are walked
     /// through the map (0: off), and the result is rejected when more than
@@ -186,6 +204,16 @@ impl Default for AlignConfig {
             ambiguity_margin: 0.25,
             ambiguity_inlier_margin: 0.01,
             ambiguity_score_ratio: 0.8,
+            global_candidates: 6,
+            global_voxel_m: 0.3,
+            global_normal_radius_m: 0.75,
+            global_radius_m: 1.5,
+            global_min_curvature: 0.03,
+            global_source_keypoints: 800,
+            global_target_keypoints: 20_000,
+            global_matches_per_point: 2,
+            global_pair_samples: 20_000,
+            global_inlier_m: 0.4,
             free_space_rays: 400,
             free_space_max_blocked: 0.1,
             free_space_step_m: 0.1,
@@ -279,6 +307,14 @@ impl AlignConfig {
             || !(0.0..=1.0).contains(&self.pinned_min_lost)
         {
             return bad("pinned_slides_m must be positive, pinned_min_inlier_ratio and pinned_min_lost in [0, 1]");
+        }
+        let global = [self.global_voxel_m, self.global_normal_radius_m, self.global_radius_m, self.global_inlier_m];
+        if self.global_candidates > 0
+            && (global.iter().any(|v| !(v.is_finite() && *v > 0.0))
+                || !(self.global_min_curvature.is_finite() && self.global_min_curvature >= 0.0)
+                || self.global_matches_per_point == 0)
+        {
+            return bad("global_* sizes must be positive, global_min_curvature not negative, global_matches_per_point at least 1");
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

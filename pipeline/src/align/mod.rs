@@ -16,10 +16,12 @@ mod carve;
 mod config;
 mod free_space;
 mod geometry;
+pub mod global;
 mod icp;
 mod map;
 mod ndt;
 mod register;
+mod rejection;
 mod tiles;
 
 pub use carve::seen_through;
@@ -33,8 +35,9 @@ pub use map::{
     Placed, PlacedPoint, PreparedMap, WindowConfig,
 };
 pub use register::{
-    yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, WeakDirection,
+    yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, SeedOrigin, WeakDirection,
 };
+pub use rejection::{AlignFailure, Reasons, Rejection};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]

@@ -4,8 +4,10 @@
 use super::config::AlignConfig;
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
 use super::geometry::{estimate_normals, pose_rows, Vec3, VoxelIndex};
+use super::global::{self, Described, GlobalParams};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
+use super::rejection::{AlignFailure, Rejection};
 use crate::timing::Lap;
 use crate::voxel_hash::{voxel_downsample, voxel_downsample_every};
 use crate::PipelineError;
@@ -40,10 +42,31 @@ pub struct AlignMetrics {
     pub information_radius_m: f64,
 }
 
+/// Where a seed came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SeedOrigin {
+    /// The guess turned on the yaw grid (and moved to a seed position).
+    YawGrid,
+    /// Proposed by the global stage's descriptor matches ([`crate::align::global`]), with the
+    /// matches that agreed with it.
+    Global { votes: usize },
+}
+
+/// A pose a seed starts from, before its coarse refinement.
+#[derive(Clone, Debug)]
+pub(super) struct SeedStart {
+    pub pose: Isometry3<f64>,
+    pub yaw_offset_deg: f64,
+    pub shift_m: [f64; 2],
+    pub origin: SeedOrigin,
+}
+
 /// One seed of the search after its coarse refinement (the first `seed_levels` NDT levels on the
 /// thinned source).
 #[derive(Clone, Debug, Serialize)]
 pub struct Seed {
+    pub origin: SeedOrigin,
     /// Yaw added to the initial guess (degrees).
     pub yaw_offset_deg: f64,
     /// Offset of the seed's position from the guess's, in the target frame (m).
@@ -77,7 +100,7 @@ pub struct Attempt {
     pub icp_ms: f64,
     pub accepted: bool,
     /// Which acceptance tests failed (empty when accepted).
-    pub rejected_because: Vec<String>,
+    pub rejected_because: Vec<Rejection>,
     /// The consistency check's ICP runs from perturbed starts (only for attempts that passed
     /// the other tests, and only when `verify_shift_m > 0`).
     pub probes: Vec<Probe>,
@@ -159,7 +182,7 @@ pub struct AlignReport {
     pub total_ms: f64,
     pub attempts: Vec<Attempt>,
     /// Why nothing was accepted (None when accepted).
-    pub failure: Option<String>,
+    pub failure: Option<AlignFailure>,
 }
 
 impl AlignReport {
@@ -174,6 +197,8 @@ pub struct Aligner {
     grids: Vec<NdtGrid>,
     icp_target: IcpTarget,
     surfels: SurfelGrid,
+    /// The target's keypoints and descriptors for the global stage (empty when it is off).
+    global_target: Described,
     /// Time spent preparing the target.
     pub prepare_ms: f64,
 }
@@ -203,7 +228,20 @@ impl Aligner {
                 reason: format!("too few points ({}) to align against", target.len()),
             });
         }
-        Ok(Self { config, grids, icp_target: IcpTarget { index, normals }, surfels, prepare_ms: t0.ms() })
+        let global_target = if config.global_candidates > 0 && config.reseed_yaw_step_deg > 0.0 {
+            let p = global_params(&config);
+            global::describe(target, &p, p.target_keypoints)
+        } else {
+            Described { points: Vec::new(), descriptors: Vec::new() }
+        };
+        Ok(Self {
+            config,
+            grids,
+            icp_target: IcpTarget { index, normals },
+            surfels,
+            global_target,
+            prepare_ms: t0.ms(),
+        })
     }
 
     pub fn config(&self) -> &AlignConfig {
@@ -258,7 +296,9 @@ impl Aligner {
         let mut attempts = Vec::new();
         let t1 = self.config.stopwatch.start();
         let seed_source = thin(voxel_downsample(src.icp, c.seed_source_voxel_m), c.seed_max_points);
-        let mut seeds = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.reseed_shift_m, true));
+        let mut starts = self.grid_starts(initial, &self.shifts(c.reseed_shift_m, true));
+        starts.extend(self.global_starts(src.icp, initial));
+        let mut seeds = self.rank_seeds(&seed_source, starts, first_level);
         let mut seed_ms = t1.ms();
         let mut tried: Vec<Isometry3<f64>> = Vec::new();
         self.try_seeds(&seeds, src, first_level, &mut tried, &mut attempts);
@@ -266,7 +306,11 @@ impl Aligner {
         let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
         if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
             let t2 = self.config.stopwatch.start();
-            let more = self.rank_seeds(&seed_source, initial, first_level, &self.shifts(c.escalate_shift_m, false));
+            let more = self.rank_seeds(
+                &seed_source,
+                self.grid_starts(initial, &self.shifts(c.escalate_shift_m, false)),
+                first_level,
+            );
             seed_ms += t2.ms();
             let before = attempts.len();
             self.try_seeds(&more, src, first_level, &mut tried, &mut attempts);
@@ -385,16 +429,15 @@ impl Aligner {
             if as_good {
                 a.ambiguous = true;
                 a.accepted = false;
-                a.rejected_because.push(format!(
-                    "ambiguous: seed yaw {:+.0} deg settles {:.2} m / {:.1} deg away with a fit as good (rms {:.4} vs {:.4} m, inliers {:.3} vs {:.3})",
-                    s.yaw_offset_deg,
+                a.rejected_because.push(Rejection::Ambiguous {
+                    seed_yaw_deg: s.yaw_offset_deg,
                     moved_m,
                     moved_deg,
-                    r.rms_residual_m,
-                    here.rms_residual_m,
-                    r.inlier_ratio,
-                    here.inlier_ratio
-                ));
+                    rms_m: r.rms_residual_m,
+                    here_rms_m: here.rms_residual_m,
+                    inliers: r.inlier_ratio,
+                    here_inliers: here.inlier_ratio,
+                });
                 break;
             }
         }
@@ -449,15 +492,14 @@ impl Aligner {
             }
         }
         let (accepted, pose) = attempts.get(best).map_or((false, *initial), |a| (a.accepted, a.pose));
-        let failure = (!accepted).then(|| {
-            let why =
-                attempts.get(best).map_or_else(|| "no attempt ran".to_string(), |a| a.rejected_because.join("; "));
-            format!(
-                "none of {} attempt(s) from {} seed(s) passed; the best (seed yaw {:+.0} deg) failed: {why}",
-                attempts.len(),
-                seeds.len().max(1),
-                attempts.get(best).map_or(0.0, |a| a.seed_yaw_offset_deg)
-            )
+        let failure = (!accepted).then(|| match attempts.get(best) {
+            None => AlignFailure::NoAttempt,
+            Some(a) => AlignFailure::NoneAccepted {
+                attempts: attempts.len(),
+                seeds: seeds.len().max(1),
+                best_seed_yaw_deg: a.seed_yaw_offset_deg,
+                because: a.rejected_because.clone(),
+            },
         });
         AlignReport {
             accepted,
@@ -488,45 +530,81 @@ impl Aligner {
         self.config.ndt_resolutions_m.iter().position(|&r| r <= ratio * radius).unwrap_or(last).min(last)
     }
 
-    /// The seeds (yaw grid at each seed position) refined on the coarse levels, best score first.
-    fn rank_seeds(
-        &self,
-        seed_source: &[Vec3],
-        initial: &Isometry3<f64>,
-        first_level: usize,
-        shifts: &[[f64; 2]],
-    ) -> Vec<Seed> {
-        let c = &self.config;
+    /// The yaw grid's starts: the guess turned by each yaw offset, at each seed position.
+    fn grid_starts(&self, initial: &Isometry3<f64>, shifts: &[[f64; 2]]) -> Vec<SeedStart> {
         let mut yaws = vec![0.0];
-        yaws.extend(yaw_offsets_deg(c.reseed_yaw_step_deg));
-        let levels = (first_level + c.seed_levels).min(self.grids.len());
-        let n = seed_source.len().max(1) as f64;
-        let mut seeds = Vec::with_capacity(yaws.len() * shifts.len());
+        yaws.extend(yaw_offsets_deg(self.config.reseed_yaw_step_deg));
+        let mut starts = Vec::with_capacity(yaws.len() * shifts.len());
         for shift in shifts {
             for &yaw in &yaws {
                 let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw.to_radians());
                 let mut translation = initial.translation;
                 translation.vector.x += shift[0];
                 translation.vector.y += shift[1];
-                let mut pose = Isometry3::from_parts(translation, rot * initial.rotation);
+                let pose = Isometry3::from_parts(translation, rot * initial.rotation);
+                starts.push(SeedStart { pose, yaw_offset_deg: yaw, shift_m: *shift, origin: SeedOrigin::YawGrid });
+            }
+        }
+        starts
+    }
+
+    /// The global stage's starts (none when it is off or the target had no keypoints), each
+    /// given as the yaw and shift that take the guess there.
+    fn global_starts(&self, source: &[Vec3], initial: &Isometry3<f64>) -> Vec<SeedStart> {
+        let c = &self.config;
+        if c.global_candidates == 0 || self.global_target.points.is_empty() {
+            return Vec::new();
+        }
+        let p = global_params(c);
+        let described = global::describe(source, &p, p.source_keypoints);
+        let pairs = global::matches(&described, &self.global_target, p.matches_per_point);
+        global::consensus(&pairs, &p)
+            .into_iter()
+            .map(|g| {
+                // The candidate levels the source on its own; keep the guess's roll and pitch.
+                let yaw = (g.pose.rotation * initial.rotation.inverse()).euler_angles().2;
+                let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw) * initial.rotation;
+                let pose = Isometry3::from_parts(g.pose.translation, rot);
+                let shift = pose.translation.vector - initial.translation.vector;
+                SeedStart {
+                    pose,
+                    yaw_offset_deg: yaw.to_degrees(),
+                    shift_m: [shift.x, shift.y],
+                    origin: SeedOrigin::Global { votes: g.votes },
+                }
+            })
+            .collect()
+    }
+
+    /// The seeds refined on the coarse levels, best score first.
+    fn rank_seeds(&self, seed_source: &[Vec3], starts: Vec<SeedStart>, first_level: usize) -> Vec<Seed> {
+        let c = &self.config;
+        let levels = (first_level + c.seed_levels).min(self.grids.len());
+        let n = seed_source.len().max(1) as f64;
+        let mut seeds: Vec<Seed> = starts
+            .into_iter()
+            .map(|start| {
+                let mut pose = start.pose;
                 for grid in self.grids.iter().take(levels).skip(first_level) {
                     pose = ndt::refine_level(grid, seed_source, pose, c.seed_max_iterations).pose;
                 }
                 let (score, matched) =
                     self.grids.get(levels.saturating_sub(1)).map_or((0.0, 0), |g| g.score(seed_source, &pose));
-                seeds.push(Seed {
-                    yaw_offset_deg: yaw,
-                    shift_m: *shift,
+                Seed {
+                    origin: start.origin,
+                    yaw_offset_deg: start.yaw_offset_deg,
+                    shift_m: start.shift_m,
                     score: score / n,
                     matched_ratio: matched as f64 / n,
                     pose,
-                });
-            }
-        }
+                }
+            })
+            .collect();
         seeds.sort_by(|a, b| a.score.total_cmp(&b.score));
         // Scores are negative (more negative is better): "within the margin" of the best.
         let best = seeds.first().map_or(0.0, |s| s.score);
-        if let Some(i) = seeds.iter().position(|s| s.yaw_offset_deg == 0.0 && s.shift_m == [0.0, 0.0]) {
+        let at_guess = |s: &Seed| s.origin == SeedOrigin::YawGrid && s.yaw_offset_deg == 0.0 && s.shift_m == [0.0, 0.0];
+        if let Some(i) = seeds.iter().position(at_guess) {
             if i > 0 && seeds.get(i).is_some_and(|s| s.score <= best * (1.0 - c.seed_prior_margin)) {
                 let guess = seeds.remove(i);
                 seeds.insert(0, guess);
@@ -667,20 +745,18 @@ impl Aligner {
         let free_space = (judged.rejected_because.is_empty() && c.free_space_rays > 0 && !rays.is_empty())
             .then(|| self.surfels.check(rays, &judged.r.pose, &self.ray_params()));
         if let Some(f) = free_space.as_ref().filter(|f| f.blocked_ratio > c.free_space_max_blocked) {
-            judged.rejected_because.push(format!(
-                "sees through the map: {} of {} rays ({:.0} %) cross a mapped surface before their end (at most {:.0} %)",
-                f.blocked,
-                f.rays,
-                f.blocked_ratio * 100.0,
-                c.free_space_max_blocked * 100.0
-            ));
+            judged.rejected_because.push(Rejection::SeesThroughMap {
+                blocked: f.blocked,
+                rays: f.rays,
+                max_ratio: c.free_space_max_blocked,
+            });
         }
         free_space
     }
 
     /// The acceptance tests of an ICP result; one refused for its degeneracy index alone gets
     /// the check of [`PinnedCheck`], and passes when it is pinned.
-    fn judge(&self, r: &icp::IcpResult, source: &[Vec3]) -> (Vec<String>, Option<PinnedCheck>) {
+    fn judge(&self, r: &icp::IcpResult, source: &[Vec3]) -> (Vec<Rejection>, Option<PinnedCheck>) {
         let c = &self.config;
         let m = metrics_of(r);
         let mut why = self.rejections(&m);
@@ -701,11 +777,10 @@ impl Aligner {
             .flat_map(|d| d.moves.iter().map(move |m| (d.translation_share, *m)))
             .max_by_key(|(_, (_, n))| *n);
         why.push(match closest {
-            None => format!("not pinned: explains {share:.3} of the source ({} asked)", c.pinned_min_inlier_ratio),
-            Some((translation_share, (move_m, n))) => format!(
-                "not pinned: moved {move_m:+.1} m along a weak direction (translation share {translation_share:.2}) it still explains {n} of the {} points it explains",
-                check.explained
-            ),
+            None => Rejection::NotPinnedExplains { share, asked: c.pinned_min_inlier_ratio },
+            Some((translation_share, (moved_m, still))) => {
+                Rejection::NotPinnedSlides { moved_m, translation_share, still, explained: check.explained }
+            }
         });
         (why, Some(check))
     }
@@ -817,20 +892,20 @@ impl Aligner {
         (here, found)
     }
 
-    fn rejections(&self, m: &AlignMetrics) -> Vec<String> {
+    fn rejections(&self, m: &AlignMetrics) -> Vec<Rejection> {
         let c = &self.config;
         let mut why = Vec::new();
         if !at_most(m.rms_residual_m, c.max_rms_m) {
-            why.push(format!("rms residual {:.4} m > {} m", m.rms_residual_m, c.max_rms_m));
+            why.push(Rejection::Residual { rms_m: m.rms_residual_m, max_m: c.max_rms_m });
         }
         if !at_most(c.min_inlier_ratio, m.inlier_ratio) {
-            why.push(format!("inlier ratio {:.3} < {}", m.inlier_ratio, c.min_inlier_ratio));
+            why.push(Rejection::InlierRatio { ratio: m.inlier_ratio, min: c.min_inlier_ratio });
         }
         if !at_most(m.update_norm, c.max_update_norm) {
-            why.push(format!("update norm {:.2e} > {:.0e}", m.update_norm, c.max_update_norm));
+            why.push(Rejection::NotSettled { update_norm: m.update_norm, max: c.max_update_norm });
         }
         if !at_most(c.min_degeneracy_index, m.degeneracy_index) {
-            why.push(format!("degeneracy index {:.2e} < {:.0e}", m.degeneracy_index, c.min_degeneracy_index));
+            why.push(Rejection::Degenerate { index: m.degeneracy_index, min: c.min_degeneracy_index });
         }
         why
     }
@@ -847,22 +922,21 @@ struct Sources<'a> {
 struct Judged {
     r: icp::IcpResult,
     /// Which tests failed (empty when it passed).
-    rejected_because: Vec<String>,
+    rejected_because: Vec<Rejection>,
     pinned: Option<PinnedCheck>,
 }
 
 /// Why a result is refused when ICP from a start off it still lands on a better fit after
 /// every hop allowed.
-fn inconsistent(better: &Probe, here: &Probe) -> String {
-    format!(
-        "inconsistent: ICP from a start {:.0} cm / {:.1} deg off settles {:.1} cm / {:.2} deg away with residual {:.4} m < {:.4} m",
-        (better.shift_m[0].hypot(better.shift_m[1])) * 100.0,
-        better.yaw_deg.abs(),
-        better.moved_m * 100.0,
-        better.moved_deg,
-        better.rms_residual_m,
-        here.rms_residual_m
-    )
+fn inconsistent(better: &Probe, here: &Probe) -> Rejection {
+    Rejection::Inconsistent {
+        start_off_m: better.shift_m[0].hypot(better.shift_m[1]),
+        start_off_deg: better.yaw_deg.abs(),
+        moved_m: better.moved_m,
+        moved_deg: better.moved_deg,
+        rms_m: better.rms_residual_m,
+        here_rms_m: here.rms_residual_m,
+    }
 }
 
 fn metrics_of(r: &icp::IcpResult) -> AlignMetrics {
@@ -913,4 +987,20 @@ fn thin(points: Vec<Vec3>, max: usize) -> Vec<Vec3> {
     }
     let step = points.len() as f64 / max as f64;
     (0..max).filter_map(|i| points.get((i as f64 * step) as usize).copied()).collect()
+}
+
+/// The global stage's settings out of the aligner's.
+fn global_params(c: &AlignConfig) -> GlobalParams {
+    GlobalParams {
+        voxel_m: c.global_voxel_m,
+        normal_radius_m: c.global_normal_radius_m,
+        radius_m: c.global_radius_m,
+        min_curvature: c.global_min_curvature,
+        source_keypoints: c.global_source_keypoints,
+        target_keypoints: c.global_target_keypoints,
+        matches_per_point: c.global_matches_per_point,
+        pair_samples: c.global_pair_samples,
+        inlier_m: c.global_inlier_m,
+        candidates: c.global_candidates,
+    }
 }

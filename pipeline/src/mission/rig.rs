@@ -8,7 +8,8 @@
 
 use super::place::{ScanPlacer, ScanPoses};
 use crate::align::{
-    filter_window, AggregateStats, AlignConfig, AlignReport, Aligner, ExclusionBox, PlacedPoint, Ray, WindowConfig,
+    filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, ExclusionBox, PlacedPoint, Ray,
+    Reasons, WindowConfig,
 };
 use crate::ar::OrientedBox;
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
@@ -43,7 +44,8 @@ pub struct RigCoreConfig {
     pub people_margin_m: f64,
     /// The robot's map must hold this many voxels before the rig tries.
     pub min_map_points: usize,
-    /// A first alignment farther than this from the expected start is refused.
+    /// A first alignment farther than this from the expected start is refused (only with a
+    /// start hint).
     pub start_gate_m: f64,
 }
 
@@ -178,7 +180,7 @@ impl AlignJob {
                 degeneracy = m.degeneracy_index,
                 rays_blocked = a.free_space.as_ref().map_or(f64::NAN, |f| f.blocked_ratio),
                 accepted = a.accepted,
-                why = %a.rejected_because.join("; "),
+                why = %Reasons(&a.rejected_because),
                 "rig alignment attempt"
             );
         }
@@ -200,14 +202,30 @@ pub enum AlignVerdict {
     Accepted {
         first: bool,
     },
-    Rejected {
-        reason: String,
+    /// Every attempt was refused, for these reasons.
+    Refused(AlignFailure),
+    /// The job could not run or its result could not be used (a message for people: nothing
+    /// branches on it).
+    Failed {
+        error: String,
     },
     /// Passed its tests, but puts the rig's start (its first odometry pose, carried by the
     /// odometry to the registered pose) `off_m` from the expected start.
     FarFromStart {
         off_m: f64,
     },
+}
+
+impl std::fmt::Display for AlignVerdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Accepted { first: true } => f.write_str("accepted (first)"),
+            Self::Accepted { first: false } => f.write_str("accepted"),
+            Self::Refused(why) => write!(f, "refused: {why}"),
+            Self::Failed { error } => write!(f, "failed: {error}"),
+            Self::FarFromStart { off_m } => write!(f, "refused: {off_m:.2} m from the expected start"),
+        }
+    }
 }
 
 pub struct RigCore {
@@ -224,7 +242,8 @@ pub struct RigCore {
     first_pose: Isometry3<f64>,
     next_align_ns: u64,
     in_flight: bool,
-    start_hint: Isometry3<f64>,
+    /// Where the responder is expected to start (none: anywhere the robot has mapped).
+    start_hint: Option<Isometry3<f64>>,
     map: Arc<Vec<Vector3<f64>>>,
     map_raw_len: usize,
     pub attempts: usize,
@@ -247,7 +266,7 @@ impl RigCore {
             first_pose: Isometry3::identity(),
             next_align_ns: 0,
             in_flight: false,
-            start_hint: Isometry3::identity(),
+            start_hint: None,
             map: Arc::new(Vec::new()),
             map_raw_len: 0,
             attempts: 0,
@@ -261,17 +280,33 @@ impl RigCore {
     /// first alignment, the odometry carries it to the rig's current pose to seed the search, and
     /// a result is refused when the start it implies (the result carried back by the odometry)
     /// lies more than `start_gate_m` from it: the responder may have walked far since.
+    /// Without a hint the search starts from the world's origin, favours no seed for being near
+    /// it, and takes a first alignment anywhere.
     pub fn set_start_hint(&mut self, world_t_lidar: Isometry3<f64>) {
-        self.start_hint = world_t_lidar;
+        self.start_hint = Some(world_t_lidar);
     }
 
-    pub fn start_hint(&self) -> &Isometry3<f64> {
-        &self.start_hint
+    pub fn start_hint(&self) -> Option<&Isometry3<f64>> {
+        self.start_hint.as_ref()
     }
 
-    /// The rig's odometry frame in the world, as the start hint places it.
+    /// The rig's odometry frame in the world, as the start hint places it (at the origin
+    /// without one).
     fn hint_world_t_odom(&self) -> Isometry3<f64> {
-        self.start_hint * self.first_pose.inverse()
+        self.start_hint.unwrap_or_else(Isometry3::identity) * self.first_pose.inverse()
+    }
+
+    /// The settings of the next registration: tracking once aligned; the seed search before,
+    /// which without a start hint gives the guess no head start over the other seeds.
+    fn job_config(&self, aligned: bool) -> AlignConfig {
+        if aligned {
+            return self.cfg.track.clone();
+        }
+        let mut config = self.cfg.align.clone();
+        if self.start_hint.is_none() {
+            config.seed_prior_margin = 0.0;
+        }
+        config
     }
 
     /// The robot's map (already one point per voxel of `voxel_m`, in its world); replaces the
@@ -379,7 +414,7 @@ impl RigCore {
             scans,
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
-            config: if aligned { self.cfg.track.clone() } else { self.cfg.align.clone() },
+            config: self.job_config(aligned),
             lidar_pose,
             guess_world_t_lidar: guess,
         })
@@ -391,20 +426,20 @@ impl RigCore {
         self.in_flight = false;
         let o = match outcome {
             Ok(o) => o,
-            Err(e) => return AlignVerdict::Rejected { reason: e.to_string() },
+            Err(e) => return AlignVerdict::Failed { error: e.to_string() },
         };
         if !o.report.accepted {
-            return AlignVerdict::Rejected { reason: format!("{:?}", o.report.failure) };
+            return AlignVerdict::Refused(o.report.failure.unwrap_or(AlignFailure::NoAttempt));
         }
         let first = !self.aligned();
-        if first {
-            let off_m = start_offset_m(&o.world_t_lidar, &o.odom_t_lidar, &self.first_pose, &self.start_hint);
+        if let (true, Some(hint)) = (first, &self.start_hint) {
+            let off_m = start_offset_m(&o.world_t_lidar, &o.odom_t_lidar, &self.first_pose, hint);
             if off_m > self.cfg.start_gate_m {
                 return AlignVerdict::FarFromStart { off_m };
             }
         }
         if let Err(e) = self.world.push_registration(o.end_ns, o.world_t_lidar) {
-            return AlignVerdict::Rejected { reason: e.to_string() };
+            return AlignVerdict::Failed { error: e.to_string() };
         }
         self.accepted += 1;
         AlignVerdict::Accepted { first }
