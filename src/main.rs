@@ -63,6 +63,9 @@ enum Command {
     Robot(cmd::robot::Args),
     /// The responder's rig node: its Avia, LIO, alignment to the robot's map, the AR view.
     Fpv(cmd::fpv::Args),
+    /// The robot-to-rig link: `certs` makes the private CA and certificates for mutual TLS.
+    #[command(subcommand)]
+    Link(cmd::link::Command),
 }
 
 fn main() -> ExitCode {
@@ -92,6 +95,7 @@ fn main() -> ExitCode {
         Command::Mission(a) => cmd::mission::run(a),
         Command::Robot(a) => cmd::robot::run(a),
         Command::Fpv(a) => cmd::fpv::run(a),
+        Command::Link(c) => cmd::link::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -97,9 +97,32 @@ pub struct LinkConfig {
     /// How long the rig waits for the robot's map after asking for it.
     #[serde(default = "default_map_fetch_timeout_ms")]
     pub map_fetch_timeout_ms: u64,
-    /// Received messages held for the caller; when full, new ones are dropped and counted.
+    /// Received messages held for the caller; when full, the oldest are dropped and counted.
     #[serde(default = "default_queue")]
     pub queue: usize,
+    /// The same queue's bound in bytes (encoded frames): a caller that never reads, or a peer
+    /// that floods, holds at most this much (a message larger than it alone is dropped).
+    #[serde(default = "default_queue_bytes")]
+    pub queue_bytes: usize,
+    /// Rig: most distinct map tiles taken; a new tile beyond it is refused and counted.
+    #[serde(default = "default_max_tiles")]
+    pub max_tiles: usize,
+    /// Rig: most bytes of map tiles held (the newest frame of each tile, encoded).
+    #[serde(default = "default_max_map_bytes")]
+    pub max_map_bytes: usize,
+    /// Rig: a tile whose version is more than this ahead of the newest version taken so far (of
+    /// any tile; 0 before the first) is refused. The robot's tile versions are its map's
+    /// generations, one per `map_period_ms` that changed anything, so this is how many map
+    /// periods a rig may miss (late join, link down) and still take the robot's tiles; it also
+    /// caps how far a bad version can hold a tile: the robot's own versions pass it after at
+    /// most this many periods (docs/link.md).
+    #[serde(default = "default_max_tile_version_lead")]
+    pub max_tile_version_lead: u32,
+    /// Allow plain `tcp/` endpoints on non-loopback addresses (and TLS listeners without
+    /// `mutual`): anyone on that network can then read the map and people and inject messages.
+    /// Loopback (127.0.0.0/8, ::1, localhost) is always allowed.
+    #[serde(default)]
+    pub insecure: bool,
     /// A zenoh JSON5 config file to start from: its `transport/link/tls` and `access_control`
     /// sections (and anything else) apply; the fields above are written over it.
     #[serde(default)]
@@ -135,6 +158,18 @@ fn default_map_fetch_timeout_ms() -> u64 {
 fn default_queue() -> usize {
     1024
 }
+fn default_queue_bytes() -> usize {
+    64 << 20
+}
+fn default_max_tiles() -> usize {
+    100_000
+}
+fn default_max_map_bytes() -> usize {
+    512 << 20
+}
+fn default_max_tile_version_lead() -> u32 {
+    100_000
+}
 
 impl Default for LinkConfig {
     fn default() -> Self {
@@ -152,6 +187,11 @@ impl Default for LinkConfig {
             reconnect_ms: default_reconnect_ms(),
             map_fetch_timeout_ms: default_map_fetch_timeout_ms(),
             queue: default_queue(),
+            queue_bytes: default_queue_bytes(),
+            max_tiles: default_max_tiles(),
+            max_map_bytes: default_max_map_bytes(),
+            max_tile_version_lead: default_max_tile_version_lead(),
+            insecure: false,
             zenoh_config: None,
             tls: None,
         }
@@ -178,6 +218,16 @@ fn json_list(items: &[String]) -> String {
     format!("[{}]", items.iter().map(|s| json(s)).collect::<Vec<_>>().join(","))
 }
 
+/// Whether an endpoint's address (`host:port`, `[v6]:port`) is on this host only.
+fn is_loopback(address: &str) -> bool {
+    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    match host.parse::<std::net::IpAddr>() {
+        Ok(ip) => ip.is_loopback(),
+        Err(_) => host.eq_ignore_ascii_case("localhost"),
+    }
+}
+
 impl LinkConfig {
     pub fn from_toml(text: &str) -> Result<Self, LinkError> {
         let cfg: Self =
@@ -192,23 +242,28 @@ impl LinkConfig {
             .map_err(|e| LinkError::ConfigFile { path: path.to_path_buf(), reason: e.to_string() })?;
         let mut cfg: Self = toml::from_str(&text)
             .map_err(|e| LinkError::ConfigFile { path: path.to_path_buf(), reason: e.to_string() })?;
-        let dir = path.parent().unwrap_or(Path::new("."));
+        cfg.resolve_paths(path.parent().unwrap_or(Path::new(".")));
+        cfg.validate().map_err(|e| LinkError::ConfigFile { path: path.to_path_buf(), reason: e.to_string() })?;
+        Ok(cfg)
+    }
+
+    /// Takes the relative paths (zenoh_config, tls) from `dir`, the folder of the file they
+    /// were read from.
+    pub fn resolve_paths(&mut self, dir: &Path) {
         let rebase = |p: &mut PathBuf| {
             if p.is_relative() {
                 *p = dir.join(&*p);
             }
         };
-        if let Some(z) = cfg.zenoh_config.as_mut() {
+        if let Some(z) = self.zenoh_config.as_mut() {
             rebase(z);
         }
-        if let Some(t) = cfg.tls.as_mut() {
+        if let Some(t) = self.tls.as_mut() {
             rebase(&mut t.root_ca);
             for p in [t.cert.as_mut(), t.key.as_mut()].into_iter().flatten() {
                 rebase(p);
             }
         }
-        cfg.validate()?;
-        Ok(cfg)
     }
 
     pub fn health(&self) -> HealthConfig {
@@ -230,6 +285,16 @@ impl LinkConfig {
         if self.map_fetch_timeout_ms == 0 {
             return bad("map_fetch_timeout_ms", "must be > 0".into());
         }
+        for (field, value) in [
+            ("queue_bytes", self.queue_bytes),
+            ("max_tiles", self.max_tiles),
+            ("max_map_bytes", self.max_map_bytes),
+            ("max_tile_version_lead", self.max_tile_version_lead as usize),
+        ] {
+            if value == 0 {
+                return bad(field, "must be > 0".into());
+            }
+        }
         let prefix_ok = !self.key_prefix.is_empty()
             && self.key_prefix.split('/').all(|s| !s.is_empty() && !s.contains(['*', '$', '?', '#']));
         if !prefix_ok {
@@ -237,8 +302,39 @@ impl LinkConfig {
         }
         for (field, list) in [("listen", &self.listen), ("connect", &self.connect)] {
             for e in list {
-                if let Err(err) = e.parse::<zenoh::config::EndPoint>() {
-                    return bad(field, format!("{e:?}: {err}"));
+                let ep = match e.parse::<zenoh::config::EndPoint>() {
+                    Ok(ep) => ep,
+                    Err(err) => return bad(field, format!("{e:?}: {err}")),
+                };
+                let tls = ep.protocol().as_str() == "tls";
+                let loopback = is_loopback(ep.address().as_str());
+                if tls && self.tls.is_none() {
+                    return bad("tls", format!("{field} endpoint {e:?} is tls/ but there is no [tls] table"));
+                }
+                if self.insecure || loopback {
+                    continue;
+                }
+                if !tls {
+                    return bad(
+                        field,
+                        format!(
+                            "{e:?} is plain {} on a non-loopback address: anyone on that network could read \
+                             the map and people and inject messages. Use a tls/ endpoint with a [tls] table \
+                             (mutual TLS; `starc link certs` makes the files), or set `insecure = true` in \
+                             this [link] table to allow it",
+                            ep.protocol().as_str()
+                        ),
+                    );
+                }
+                let mutual = self.tls.as_ref().is_some_and(|t| t.mutual && t.cert.is_some());
+                if field == "listen" && !mutual {
+                    return bad(
+                        "tls.mutual",
+                        format!(
+                            "listening on {e:?} (not loopback) without mutual TLS lets anyone connect: set \
+                             `mutual = true` with `cert` and `key` in [tls], or `insecure = true` to allow it"
+                        ),
+                    );
                 }
             }
         }
@@ -287,6 +383,9 @@ impl LinkConfig {
         set("transport/link/tx/queue/size/real_time", "4".into())?;
         set("transport/link/tx/queue/size/interactive_high", "8".into())?;
         set("transport/link/tx/queue/congestion_control/drop/wait_before_drop", "5000".into())?;
+        // zenoh reassembles a fragmented message up to 1 GiB by default: no frame of ours is
+        // larger than the codec's limit, so a peer cannot make us hold more for one message.
+        set("transport/link/rx/max_message_size", (starc_pipeline::link::MAX_MESSAGE_BYTES + (64 << 10)).to_string())?;
         if let Some(t) = &self.tls {
             let path = |p: &Path| json(&p.to_string_lossy());
             set("transport/link/tls/root_ca_certificate", path(&t.root_ca))?;

@@ -11,6 +11,13 @@ pub enum LinkError {
     Config { field: &'static str, reason: String },
     #[error("link config {path}: {reason}")]
     ConfigFile { path: PathBuf, reason: String },
+    /// Making the CA or a certificate (`starc link certs`).
+    #[error("link certificates: {context}: {reason}")]
+    Certs { context: &'static str, reason: String },
+    /// Writing a certificate or key file (the I/O error's text: kept out of the error chain so
+    /// that `{:#}` does not print it twice).
+    #[error("{path}: {reason}")]
+    File { path: PathBuf, reason: String },
     /// zenoh refused (opening the session, declaring, sending, querying).
     #[error("zenoh {context}: {reason}")]
     Zenoh { context: &'static str, reason: String },

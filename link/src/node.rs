@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use starc_pipeline::link::{
-    decode, encode, map_tile_id, ClockOffset, LinkHealth, LinkMessage, LinkState, OffsetEstimate, Role,
+    decode, encode, kind_name, map_tile_id, ClockOffset, LinkHealth, LinkMessage, LinkState, OffsetEstimate, Role,
 };
 use starc_time::Stamp;
 use tokio::sync::{mpsc, watch};
@@ -18,7 +18,9 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::sample::Sample;
 use zenoh::Session;
 
+use crate::acl::{self, Refusal};
 use crate::keys::{map_key, message_key, sender_wildcard};
+use crate::queue::BoundedQueue;
 use crate::stats::{LatencySummary, LatencyWindow};
 use crate::{LinkConfig, LinkError};
 
@@ -65,10 +67,15 @@ pub struct LinkReport {
     /// reaching us (robot host clock onto ours by the offset estimate). The scan's own stamp is
     /// on the robot LiDAR's clock (PTP or free-running), which no host clock can be compared with.
     pub detections_age: Option<LatencySummary>,
-    /// Messages from the peer handed to the caller, refused as damaged, dropped on a full queue.
+    /// Messages from the peer handed to the caller, refused as damaged, dropped on a full queue
+    /// (the oldest go first).
     pub received: u64,
     pub decode_errors: u64,
     pub queue_drops: u64,
+    /// Bytes waiting in the queue for the caller now (at most `queue_bytes`).
+    pub queue_bytes: usize,
+    /// Messages that decoded but were not taken, by reason.
+    pub refused: Refused,
     /// Map fetches started (rig) and tiles they brought.
     pub map_fetches: u64,
     pub map_tiles_fetched: u64,
@@ -76,6 +83,19 @@ pub struct LinkReport {
     /// heartbeat said it holds.
     pub map_tiles: usize,
     pub peer_map_tiles: u32,
+}
+
+/// Messages from the peer that decoded but were not taken (each also logged at debug level).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Refused {
+    /// A kind the peer's role never sends (the robot takes only heartbeats and clock messages
+    /// from a rig), or a heartbeat naming another role.
+    pub kind: u64,
+    /// Arrived on a key that is not its kind's (or a fetched tile not on its own key).
+    pub key: u64,
+    /// Rig: map tiles beyond `max_tiles` or `max_map_bytes`, or with a version more than
+    /// `max_tile_version_lead` ahead of the newest taken.
+    pub tiles: u64,
 }
 
 /// What the node's tasks share with the zenoh callbacks.
@@ -89,12 +109,15 @@ struct Shared {
     detections_age: LatencyWindow,
     received: u64,
     decode_errors: u64,
-    queue_drops: u64,
+    refused: Refused,
     map_fetches: u64,
     map_tiles_fetched: u64,
     peer_map_tiles: u32,
-    /// Rig: tiles seen (key -> newest version).
-    tiles_seen: HashMap<TileKey, u32>,
+    /// Rig: tiles taken (key -> newest version, its frame's bytes), their bytes together, and
+    /// the newest version of any tile (the robot's map generation as far as we know).
+    tiles_seen: HashMap<TileKey, (u32, usize)>,
+    tile_bytes: usize,
+    newest_tile_version: u32,
     /// Robot: newest tile of each key, as encoded link frames, for the map queryable.
     tiles_held: BTreeMap<TileKey, (u32, Vec<u8>)>,
     fetch_in_flight: bool,
@@ -127,7 +150,7 @@ struct Inbox {
     role: Role,
     cfg: Arc<LinkConfig>,
     shared: Arc<Mutex<Shared>>,
-    to_caller: mpsc::Sender<Received>,
+    to_caller: Arc<BoundedQueue<Received>>,
     control: mpsc::Sender<Control>,
 }
 
@@ -136,16 +159,28 @@ fn signed_diff(a: u64, b: u64) -> i64 {
 }
 
 impl Inbox {
-    fn on_bytes(&self, bytes: &[u8], fetched: bool) {
+    /// A message from the peer on `key`: decoded, checked against what the peer's role sends
+    /// and the key it came on, then handled here (heartbeats, clock) or queued for the caller.
+    fn on_bytes(&self, key: &str, bytes: &[u8], fetched: bool) {
         let recv_host_ns = host_now_ns();
         let msg = match decode(bytes) {
             Ok(m) => m,
             Err(e) => {
                 lock(&self.shared).decode_errors += 1;
-                tracing::debug!("link: refused a message: {e}");
+                tracing::debug!("link: refused a message on {key}: {e}");
                 return;
             }
         };
+        let peer = self.role.peer();
+        if let Err(why) = acl::check(&self.cfg.key_prefix, peer, key, &msg, fetched) {
+            let mut s = lock(&self.shared);
+            match why {
+                Refusal::Kind => s.refused.kind += 1,
+                Refusal::Key => s.refused.key += 1,
+            }
+            tracing::debug!("link: refused a {} on {key} from the {}: {why:?}", kind_name(&msg), peer.name());
+            return;
+        }
         let mut s = lock(&self.shared);
         let latency = |s: &Shared, sent: u64| {
             let raw = signed_diff(recv_host_ns, sent);
@@ -154,11 +189,8 @@ impl Inbox {
         };
         let (mut latency_ns, mut raw_latency_ns) = (None, None);
         match &msg {
-            LinkMessage::Heartbeat { role, sent_host_ns, map_tiles, .. } => {
-                if *role != self.role.peer() {
-                    tracing::debug!("link: heartbeat from a {} ignored", role.name());
-                    return;
-                }
+            LinkMessage::Heartbeat { sent_host_ns, map_tiles, .. } => {
+                // acl::check took only a heartbeat naming the peer's role.
                 let was = s.health.state();
                 if s.health.on_heartbeat(recv_host_ns).is_some() {
                     tracing::info!("link: {} up (was {was})", self.role.peer().name());
@@ -206,10 +238,13 @@ impl Inbox {
                     s.detections_age.record(c);
                 }
             }
-            LinkMessage::MapTile { bytes } => {
-                if let Some((key, version)) = map_tile_id(bytes) {
-                    let v = s.tiles_seen.entry(key).or_insert(version);
-                    *v = (*v).max(version);
+            LinkMessage::MapTile { bytes: tile } => {
+                if self.role == Role::Rig {
+                    if let Err(why) = self.take_tile(&mut s, tile, bytes.len()) {
+                        s.refused.tiles += 1;
+                        tracing::debug!("link: map tile refused: {why}");
+                        return;
+                    }
                 }
                 if fetched {
                     s.map_tiles_fetched += 1;
@@ -218,10 +253,41 @@ impl Inbox {
             LinkMessage::RobotPose { .. } => {}
         }
         let r = Received { msg, recv_host_ns, latency_ns, raw_latency_ns, fetched };
-        match self.to_caller.try_send(r) {
-            Ok(()) => s.received += 1,
-            Err(_) => s.queue_drops += 1,
+        if self.to_caller.push(r, bytes.len()).queued {
+            s.received += 1;
         }
+    }
+
+    /// Rig: whether a tile may be taken, and its bookkeeping if so. Bounds: `max_tiles`
+    /// distinct tiles, `max_map_bytes` of them, and a version at most `max_tile_version_lead`
+    /// ahead of the newest taken (the robot numbers its map's generations 1, 2, ...; one far
+    /// ahead would hide every real update of its tile, `TileMap::apply` keeping the highest).
+    /// An older or equal version changes nothing here and is passed on (the caller's
+    /// `TileMap` ignores it).
+    fn take_tile(&self, s: &mut Shared, tile: &[u8], frame_bytes: usize) -> Result<(), String> {
+        let Some((key, version)) = map_tile_id(tile) else { return Err("too short for a tile header".into()) };
+        let limit = u64::from(s.newest_tile_version) + u64::from(self.cfg.max_tile_version_lead);
+        if u64::from(version) > limit {
+            return Err(format!(
+                "tile {key:?} version {version} is more than {} ahead of the newest taken ({})",
+                self.cfg.max_tile_version_lead, s.newest_tile_version
+            ));
+        }
+        let held = s.tiles_seen.get(&key).copied();
+        if held.is_some_and(|(v, _)| v >= version) {
+            return Ok(());
+        }
+        if held.is_none() && s.tiles_seen.len() >= self.cfg.max_tiles {
+            return Err(format!("tile {key:?} beyond max_tiles {}", self.cfg.max_tiles));
+        }
+        let bytes = s.tile_bytes - held.map_or(0, |(_, b)| b) + frame_bytes;
+        if bytes > self.cfg.max_map_bytes {
+            return Err(format!("tile {key:?} would hold {bytes} B of tiles, beyond max_map_bytes"));
+        }
+        s.tiles_seen.insert(key, (version, frame_bytes));
+        s.tile_bytes = bytes;
+        s.newest_tile_version = s.newest_tile_version.max(version);
+        Ok(())
     }
 
     /// Asks the task for a map fetch unless one runs, or (when not forced) one started lately.
@@ -271,7 +337,7 @@ pub struct LinkNode {
     session: Session,
     shared: Arc<Mutex<Shared>>,
     inbox: Inbox,
-    from_peer: mpsc::Receiver<Received>,
+    from_peer: Arc<BoundedQueue<Received>>,
     stop: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
@@ -295,22 +361,27 @@ impl LinkNode {
             detections_age: LatencyWindow::default(),
             received: 0,
             decode_errors: 0,
-            queue_drops: 0,
+            refused: Refused::default(),
             map_fetches: 0,
             map_tiles_fetched: 0,
             peer_map_tiles: 0,
             tiles_seen: HashMap::new(),
+            tile_bytes: 0,
+            newest_tile_version: 0,
             tiles_held: BTreeMap::new(),
             fetch_in_flight: false,
             last_fetch_ns: 0,
         }));
-        let (to_caller, from_peer) = mpsc::channel(cfg.queue);
+        let from_peer = Arc::new(BoundedQueue::new(cfg.queue, cfg.queue_bytes));
         let (control_tx, control_rx) = mpsc::channel(64);
-        let inbox = Inbox { role, cfg: cfg.clone(), shared: shared.clone(), to_caller, control: control_tx };
+        let inbox =
+            Inbox { role, cfg: cfg.clone(), shared: shared.clone(), to_caller: from_peer.clone(), control: control_tx };
         let sub_inbox = inbox.clone();
         let subscriber = session
             .declare_subscriber(sender_wildcard(&cfg.key_prefix, role.peer()))
-            .callback(move |sample: Sample| sub_inbox.on_bytes(&sample.payload().to_bytes(), false))
+            .callback(move |sample: Sample| {
+                sub_inbox.on_bytes(sample.key_expr().as_str(), &sample.payload().to_bytes(), false)
+            })
             .await
             .map_err(|e| LinkError::zenoh("declare subscriber", e))?;
         let (stop, stop_rx) = watch::channel(false);
@@ -347,14 +418,14 @@ impl LinkNode {
         put(&self.session, &self.cfg.key_prefix, self.role, msg).await
     }
 
-    /// The next message from the peer; None once the node is closed.
+    /// The next message from the peer (the oldest still held); None once the node is closed.
     pub async fn recv(&mut self) -> Option<Received> {
-        self.from_peer.recv().await
+        self.from_peer.pop().await
     }
 
     /// A message from the peer if one is waiting.
     pub fn try_recv(&mut self) -> Option<Received> {
-        self.from_peer.try_recv().ok()
+        self.from_peer.try_pop()
     }
 
     /// Asks the robot for its whole map now (rig side; the node also does so by itself when the
@@ -388,7 +459,9 @@ impl LinkNode {
             detections_age: s.detections_age.summary(),
             received: s.received,
             decode_errors: s.decode_errors,
-            queue_drops: s.queue_drops,
+            queue_drops: self.from_peer.dropped(),
+            queue_bytes: self.from_peer.bytes(),
+            refused: s.refused,
             map_fetches: s.map_fetches,
             map_tiles_fetched: s.map_tiles_fetched,
             map_tiles: s.map_tiles(self.role),
@@ -399,6 +472,7 @@ impl LinkNode {
     /// Stops the node's tasks and closes the zenoh session (its listeners and connections).
     pub async fn close(mut self) -> Result<(), LinkError> {
         let _ = self.stop.send(true);
+        self.from_peer.close();
         for t in self.tasks.drain(..) {
             // Each task checks the stop flag at least every heartbeat; abort covers a stuck one.
             let abort = t.abort_handle();
@@ -506,7 +580,7 @@ async fn fetch_map(session: Session, inbox: Inbox) {
             // Bounded: the query ends at its timeout at the latest.
             while let Ok(reply) = replies.recv_async().await {
                 if let Ok(sample) = reply.result() {
-                    inbox.on_bytes(&sample.payload().to_bytes(), true);
+                    inbox.on_bytes(sample.key_expr().as_str(), &sample.payload().to_bytes(), true);
                     tiles += 1;
                 }
             }

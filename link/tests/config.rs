@@ -54,3 +54,38 @@ fn relative_paths_follow_the_file_and_tls_lands_in_zenoh() {
     assert_eq!(z.get_json("transport/link/tls/enable_mtls").unwrap(), "true");
     assert!(z.get_json("transport/link/tls/listen_certificate").unwrap().contains("r.pem"));
 }
+
+#[test]
+fn plain_tcp_beyond_loopback_needs_insecure_and_the_error_names_the_key_and_file() {
+    let e = LinkConfig::from_toml("listen = [\"tcp/192.168.50.2:7447\"]").unwrap_err().to_string();
+    assert!(e.contains("listen") && e.contains("insecure = true"), "{e}");
+    let e = LinkConfig::from_toml("connect = [\"tcp/robot.local:7447\"]").unwrap_err().to_string();
+    assert!(e.contains("connect"), "{e}");
+    assert!(LinkConfig::from_toml("listen = [\"tcp/192.168.50.2:7447\"]\ninsecure = true").is_ok());
+    // Loopback, v4, v6 and by name, is always allowed.
+    for ep in ["tcp/127.0.0.1:7447", "tcp/127.0.7.1:7447", "tcp/[::1]:7447", "tcp/localhost:7447"] {
+        assert!(LinkConfig::from_toml(&format!("connect = [\"{ep}\"]")).is_ok(), "{ep}");
+    }
+    // tls/ needs a [tls] table; listening beyond loopback needs mutual TLS.
+    assert!(LinkConfig::from_toml("connect = [\"tls/192.168.50.2:7447\"]").is_err());
+    let tls = "[tls]\nroot_ca = \"ca.pem\"\ncert = \"r.pem\"\nkey = \"r.key\"\n";
+    let e = LinkConfig::from_toml(&format!("listen = [\"tls/192.168.50.2:7447\"]\n{tls}")).unwrap_err().to_string();
+    assert!(e.contains("tls.mutual"), "{e}");
+    assert!(LinkConfig::from_toml(&format!("listen = [\"tls/192.168.50.2:7447\"]\n{tls}mutual = true\n")).is_ok());
+    // From a file, the error names the file.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("robot_link.toml");
+    std::fs::write(&path, "listen = [\"tcp/10.0.0.2:7447\"]\n").unwrap();
+    let e = LinkConfig::from_file(&path).unwrap_err().to_string();
+    assert!(e.contains("robot_link.toml") && e.contains("listen"), "{e}");
+}
+
+#[test]
+fn zenoh_never_reassembles_more_than_our_largest_frame() {
+    let z = LinkConfig::default().zenoh().unwrap();
+    let max: usize = z.get_json("transport/link/rx/max_message_size").unwrap().parse().unwrap();
+    let frame = starc_pipeline::link::MAX_MESSAGE_BYTES;
+    assert!((frame..2 * frame).contains(&max), "{max}");
+    assert!(LinkConfig::from_toml("queue_bytes = 0").is_err());
+    assert!(LinkConfig::from_toml("max_tile_version_lead = 0").is_err());
+}

@@ -160,12 +160,33 @@ fn rel(config: &Path, p: &mut Option<PathBuf>) {
     }
 }
 
+/// The `[link]` table of a node config: the link's own checks (plain TCP beyond loopback
+/// refused unless `insecure = true`, TLS files named), the error naming the file.
+fn check_link(link: &LinkConfig, config: &Path) -> Result<()> {
+    link.validate().map_err(|source| NodeError::LinkConfig { path: config.into(), source })
+}
+
+/// The link's relative paths (zenoh_config, [link.tls] files) taken from the config's folder.
+fn rel_link(config: &Path, link: &mut LinkConfig) {
+    if let Some(dir) = config.parent() {
+        link.resolve_paths(dir);
+    }
+}
+
 impl RobotNodeConfig {
+    /// Reads `path`, takes its relative paths from its folder, and checks it.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let mut cfg: Self = load(path)?;
+        cfg.resolve_paths(path);
+        check_link(&cfg.link, path)?;
+        Ok(cfg)
+    }
+
     /// Relative paths in the file are relative to the file.
     pub fn resolve_paths(&mut self, config: &Path) {
         rel(config, &mut self.lio);
         rel(config, &mut self.record);
-        rel(config, &mut self.link.zenoh_config);
+        rel_link(config, &mut self.link);
     }
 }
 
@@ -187,13 +208,22 @@ impl FpvNodeConfig {
         self.start_gate_m == f64::INFINITY
     }
 
+    /// Reads `path`, takes its relative paths from its folder, and checks it.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let mut cfg: Self = load(path)?;
+        cfg.resolve_paths(path);
+        cfg.validate()?;
+        check_link(&cfg.link, path)?;
+        Ok(cfg)
+    }
+
     /// Relative paths in the file are relative to the file.
     pub fn resolve_paths(&mut self, config: &Path) {
         rel(config, &mut self.lio);
         rel(config, &mut self.render);
         rel(config, &mut self.record);
         rel(config, &mut self.view.png_dir);
-        rel(config, &mut self.link.zenoh_config);
+        rel_link(config, &mut self.link);
     }
 }
 
@@ -209,10 +239,17 @@ mod tests {
     #[test]
     fn shipped_robot_config_loads() {
         let path = shipped("robot.toml");
-        let mut cfg: RobotNodeConfig = load(&path).unwrap();
-        cfg.resolve_paths(&path);
+        let cfg = RobotNodeConfig::from_file(&path).unwrap();
         assert_eq!(cfg.lidar_ip, Some(Ipv4Addr::new(192, 168, 1, 101)));
         assert!(!cfg.link.multicast_scouting);
+        // Mutual TLS on, with the files `starc link certs` writes to config/certs by default.
+        assert!(!cfg.link.insecure);
+        assert!(cfg.link.listen.iter().all(|e| e.starts_with("tls/")), "{:?}", cfg.link.listen);
+        let tls = cfg.link.tls.as_ref().unwrap();
+        assert!(tls.mutual);
+        assert_eq!(tls.root_ca, shipped("certs/ca.pem"));
+        assert_eq!(tls.cert.as_deref(), Some(shipped("certs/robot.pem").as_path()));
+        assert_eq!(tls.key.as_deref(), Some(shipped("certs/robot.key").as_path()));
         // The LIO file it names exists and parses.
         lio_config(cfg.lio.as_deref()).unwrap();
     }
@@ -220,9 +257,12 @@ mod tests {
     #[test]
     fn shipped_fpv_config_loads_and_its_camera_looks_forward() {
         let path = shipped("fpv.toml");
-        let mut cfg: FpvNodeConfig = load(&path).unwrap();
-        cfg.resolve_paths(&path);
+        let cfg = FpvNodeConfig::from_file(&path).unwrap();
         render_config(cfg.render.as_deref()).unwrap();
+        assert!(cfg.link.connect.iter().all(|e| e.starts_with("tls/")), "{:?}", cfg.link.connect);
+        let tls = cfg.link.tls.as_ref().unwrap();
+        assert!(tls.mutual && tls.verify_name && !cfg.link.insecure);
+        assert_eq!(tls.cert.as_deref(), Some(shipped("certs/rig.pem").as_path()));
         let t = cfg.camera.lidar_t_camera().unwrap();
         // The camera's optical axis (z) is the LiDAR's forward (x), its image down (y) is down.
         let forward = t.rotation * nalgebra::Vector3::z();

@@ -15,6 +15,9 @@ pub enum NodeError {
     File { path: PathBuf, source: starc_pipeline::PipelineError },
     #[error("{0}")]
     Pipeline(#[from] starc_pipeline::PipelineError),
+    /// A node config's `[link]` table the link refuses (names the file).
+    #[error("{path}: [link]: {source}")]
+    LinkConfig { path: PathBuf, source: starc_link::LinkError },
     #[error("the link: {0}")]
     Link(#[from] starc_link::LinkError),
     #[error("the Livox driver: {0}")]

@@ -2,7 +2,7 @@
 //! or SIGTERM, finishing its recording.
 
 use super::runtime;
-use starc_node::config::{load, FpvNodeConfig};
+use starc_node::config::FpvNodeConfig;
 use starc_node::{fpv, stop_on_signals};
 use std::path::PathBuf;
 
@@ -14,8 +14,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut cfg: FpvNodeConfig = load(&args.config)?;
-    cfg.resolve_paths(&args.config);
+    let cfg = FpvNodeConfig::from_file(&args.config)?;
     runtime()?.block_on(async move {
         let (_stop_tx, stop) = stop_on_signals()?;
         let summary = fpv::run(cfg, stop, Vec::new(), None).await?;

@@ -10,6 +10,7 @@ pub mod fpv;
 pub mod gen;
 pub mod imu;
 pub mod inspect;
+pub mod link;
 pub mod lio;
 pub mod livox;
 pub mod mission;

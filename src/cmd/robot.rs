@@ -2,7 +2,7 @@
 //! SIGTERM, finishing its recording.
 
 use super::runtime;
-use starc_node::config::{load, RobotNodeConfig};
+use starc_node::config::RobotNodeConfig;
 use starc_node::{robot, stop_on_signals};
 use std::path::PathBuf;
 
@@ -14,8 +14,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut cfg: RobotNodeConfig = load(&args.config)?;
-    cfg.resolve_paths(&args.config);
+    let cfg = RobotNodeConfig::from_file(&args.config)?;
     runtime()?.block_on(async move {
         let (_stop_tx, stop) = stop_on_signals()?;
         let summary = robot::run(cfg, stop, None).await?;
