@@ -1,7 +1,8 @@
 #![no_main]
 //! MIP: the stream decoder never panics on any bytes in any chunking, never holds more than the
-//! protocol allows, and every sample it emits re-encodes to a packet that decodes to the same
-//! raw values; packets and commands that parse re-encode to themselves.
+//! protocol allows, every sample it emits has finite rates, accelerations and orientation and
+//! re-encodes to a packet that decodes to the same raw values; packets and commands that parse
+//! re-encode to themselves.
 use libfuzzer_sys::fuzz_target;
 use starc_imu::mip::packet::MAX_PACKET_LEN;
 use starc_imu::mip::{MipCommand, MipData, MipDecoder, MipReply, Packet};
@@ -24,6 +25,9 @@ fuzz_target!(|data: &[u8]| {
     for e in &out {
         match e {
             ImuEvent::Sample(sample) => {
+                assert!(sample.gyro_rad_s.iter().chain(sample.accel_m_s2.iter()).all(|v| v.is_finite()));
+                assert!(sample.orientation_wxyz.is_none_or(|q| q.iter().all(|v| v.is_finite())));
+                assert!(sample.euler_rad.is_none_or(|e| e.iter().all(|v| v.is_finite())));
                 let RawSample::Mip(raw) = &sample.raw else { panic!("not MIP") };
                 let mut b = Vec::new();
                 raw.encode(&mut b).expect("a decoded sample re-encodes");

@@ -19,6 +19,11 @@ fuzz_target!(|data: &[u8]| {
     let s = d.stats();
     assert_eq!(s.skipped_bytes + 11 * s.frames + d.buffered() as u64, bytes.len() as u64);
     assert_eq!(s.samples + s.incomplete, out.len() as u64);
+    for e in &out {
+        if let starc_imu::ImuEvent::Sample(sample) = e {
+            assert!(sample.gyro_rad_s.iter().chain(sample.accel_m_s2.iter()).all(|v| v.is_finite()));
+        }
+    }
     if let Ok(f) = WitFrame::parse(bytes) {
         assert_eq!(&f.encode()[..], &bytes[..11]);
     }

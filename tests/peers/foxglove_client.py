@@ -7,6 +7,8 @@ Connects with subprotocol foxglove.websocket.v1, reads serverInfo and advertise,
                           JSON summary; also sends a malformed request and an unsubscribe.
   stall URL SECONDS TOPIC subscribe, then stop reading for SECONDS (a slow client).
   noproto URL             connect without the subprotocol; print the HTTP status of the refusal.
+  connect URL             connect with the subprotocol (the URL may carry ?token=); print 101 and
+                          the serverInfo op, or the HTTP status of the refusal.
 """
 
 import asyncio
@@ -102,6 +104,15 @@ async def noproto(url):
         print(json.dumps({"status": e.response.status_code}))
 
 
+async def connect(url):
+    try:
+        async with websockets.connect(url, subprotocols=[SUBPROTOCOL]) as ws:
+            info, _ = await hello(ws)
+            print(json.dumps({"status": 101, "op": info["op"]}))
+    except websockets.exceptions.InvalidStatus as e:
+        print(json.dumps({"status": e.response.status_code}))
+
+
 def main():
     mode, url = sys.argv[1], sys.argv[2]
     if mode == "receive":
@@ -110,6 +121,8 @@ def main():
         asyncio.run(stall(url, float(sys.argv[3]), sys.argv[4]))
     elif mode == "noproto":
         asyncio.run(noproto(url))
+    elif mode == "connect":
+        asyncio.run(connect(url))
     else:
         sys.exit(f"unknown mode {mode}")
 

@@ -5,9 +5,18 @@
 //!
 //! Each client has a bounded queue; when a slow client's queue is full its messages are dropped
 //! (counted), so [`FoxgloveServer::publish`] never waits on the network.
+//!
+//! Every connection passes the gate at accept ([`crate::gate`]) and must finish its WebSocket
+//! upgrade within the request deadline; only an upgrade that offers the token (if one is
+//! configured: `ws://rig:8765/?token=...`) and our subprotocol takes one of [`MAX_CLIENTS`]
+//! slots. Refusals are HTTP: 401 without the token, 403 with a wrong one, 400 without the
+//! subprotocol, 503 with every slot taken.
 
+use super::access::{Verdict, ViewAccess};
 use super::error::ViewError;
 use super::foxglove_proto::{self as proto, ChannelInfo, ClientOp};
+use super::gate::{ConnCounts, Gate, Ticket};
+use super::request::offered_token;
 use super::Shutdown;
 use futures_util::{SinkExt, StreamExt};
 use starc_pipeline::record::{msgs::RosMessage, schema, Topic};
@@ -17,7 +26,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, OwnedSemaphorePermit, Semaphore};
 use tokio::task::JoinHandle;
 use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tokio_tungstenite::tungstenite::http::{HeaderValue, StatusCode};
@@ -30,7 +39,6 @@ pub const MAX_CLIENTS: usize = 16;
 pub const CLIENT_QUEUE: usize = 32;
 /// Largest message a client may send us (subscribe lists are small).
 const MAX_CLIENT_MESSAGE_BYTES: usize = 256 * 1024;
-const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// A topic to advertise and the ROS 2 type it carries (`pkg/msg/Type`).
@@ -78,6 +86,10 @@ struct Shared {
     next_client: AtomicU64,
     dropped: AtomicU64,
     session_id: String,
+    access: ViewAccess,
+    gate: Arc<Gate>,
+    /// Client slots, taken during the upgrade once the request is read and accepted.
+    slots: Arc<Semaphore>,
 }
 
 /// Cheap to clone; publish from any thread.
@@ -88,13 +100,26 @@ pub struct FoxgloveServer {
 }
 
 impl FoxgloveServer {
-    /// Binds `bind` and serves until `shutdown` fires. Every channel's type must be one
-    /// `starc_pipeline::record::schema` knows, and topics must be unique.
+    /// Binds `bind` and serves until `shutdown` fires, with the default caps and no token (so
+    /// only on loopback). Every channel's type must be one `starc_pipeline::record::schema`
+    /// knows, and topics must be unique.
     pub async fn start(
         bind: SocketAddr,
         channels: &[ChannelSpec],
         shutdown: Shutdown,
     ) -> Result<(Self, JoinHandle<()>), ViewError> {
+        Self::start_with(bind, channels, &ViewAccess::default(), shutdown).await
+    }
+
+    /// [`FoxgloveServer::start`] under `access`: the connection caps, and the token, which a
+    /// bind beyond loopback must have.
+    pub async fn start_with(
+        bind: SocketAddr,
+        channels: &[ChannelSpec],
+        access: &ViewAccess,
+        shutdown: Shutdown,
+    ) -> Result<(Self, JoinHandle<()>), ViewError> {
+        access.check_bind("foxglove_bind", bind)?;
         let mut infos = Vec::with_capacity(channels.len());
         let mut by_topic = HashMap::new();
         for (i, c) in channels.iter().enumerate() {
@@ -130,6 +155,9 @@ impl FoxgloveServer {
             next_client: AtomicU64::new(1),
             dropped: AtomicU64::new(0),
             session_id,
+            access: access.clone(),
+            gate: Gate::new(access.limits),
+            slots: Arc::new(Semaphore::new(MAX_CLIENTS)),
         });
         tracing::info!("Foxglove WebSocket server on ws://{addr}");
         let task = tokio::spawn(accept_loop(listener, shared.clone(), shutdown));
@@ -150,6 +178,11 @@ impl FoxgloveServer {
     pub fn subscribed(&self, topic: &str) -> bool {
         let Some(channel) = self.shared.by_topic.get(topic) else { return false };
         self.shared.clients.lock().map(|c| c.values().any(|s| s.subscriptions.contains_key(channel))).unwrap_or(false)
+    }
+
+    /// Connections accepted, refused, cut and held so far.
+    pub fn connections(&self) -> ConnCounts {
+        self.shared.gate.counts()
     }
 
     /// Messages dropped for slow clients so far.
@@ -189,17 +222,68 @@ impl FoxgloveServer {
 
 async fn accept_loop(listener: TcpListener, shared: Arc<Shared>, mut shutdown: Shutdown) {
     while let Some((stream, peer)) = super::next_connection(&listener, &mut shutdown, "Foxglove server").await {
-        if shared.clients.lock().map(|c| c.len()).unwrap_or(MAX_CLIENTS) >= MAX_CLIENTS {
-            tracing::warn!("Foxglove server: refusing {peer}: {MAX_CLIENTS} clients already");
-            continue;
-        }
+        let mut ticket = match shared.gate.admit(peer.ip()) {
+            Ok(t) => t,
+            Err(refusal) => {
+                // Closed without a word: a WebSocket client learns nothing more from a 503 here.
+                tracing::debug!("Foxglove server: refusing {peer}: {refusal:?}");
+                continue;
+            }
+        };
         let (shared, shutdown) = (shared.clone(), shutdown.clone());
         tokio::spawn(async move {
-            if let Err(e) = serve_client(stream, &shared, shutdown).await {
+            if let Err(e) = serve_client(stream, &shared, &mut ticket, shutdown).await {
                 tracing::debug!("Foxglove server: {peer}: {e}");
             }
+            drop(ticket);
         });
     }
+}
+
+/// Why an upgrade was refused, for the counts.
+enum Refused {
+    Token,
+    Busy,
+}
+
+/// Decides an upgrade request: the token first (so a stranger learns nothing else), then our
+/// subprotocol, then a free slot, which it takes into `slot`.
+#[allow(clippy::result_large_err)] // the signature tungstenite's callback requires
+fn admit_upgrade(
+    shared: &Shared,
+    request: &Request,
+    response: Response,
+    slot: &mut Option<OwnedSemaphorePermit>,
+    refused: &mut Option<Refused>,
+) -> Result<Response, ErrorResponse> {
+    let header = |name: &str| request.headers().get(name).and_then(|v| v.to_str().ok());
+    let offered = offered_token(request.uri().query(), header("authorization"), header("cookie"));
+    let denial = match shared.access.verdict(offered) {
+        Verdict::Allowed => None,
+        Verdict::Missing => Some((StatusCode::UNAUTHORIZED, "token required: ws://<rig>:<port>/?token=<token>\n")),
+        Verdict::Wrong => Some((StatusCode::FORBIDDEN, "wrong token\n")),
+    };
+    if let Some((status, text)) = denial {
+        *refused = Some(Refused::Token);
+        return Err(refusal(status, text));
+    }
+    let response = select_subprotocol(request, response)?;
+    match shared.slots.clone().try_acquire_owned() {
+        Ok(permit) => {
+            *slot = Some(permit);
+            Ok(response)
+        }
+        Err(_) => {
+            *refused = Some(Refused::Busy);
+            Err(refusal(StatusCode::SERVICE_UNAVAILABLE, "too many clients\n"))
+        }
+    }
+}
+
+fn refusal(status: StatusCode, text: &str) -> ErrorResponse {
+    let mut refusal = ErrorResponse::new(Some(text.to_string()));
+    *refusal.status_mut() = status;
+    refusal
 }
 
 /// Accepts only clients that offer our subprotocol, and selects it.
@@ -213,23 +297,38 @@ fn select_subprotocol(request: &Request, mut response: Response) -> Result<Respo
         .flat_map(|v| v.split(','))
         .any(|p| p.trim() == proto::SUBPROTOCOL);
     if !offered {
-        let mut refusal = ErrorResponse::new(Some(format!("subprotocol {} required\n", proto::SUBPROTOCOL)));
-        *refusal.status_mut() = StatusCode::BAD_REQUEST;
-        return Err(refusal);
+        return Err(refusal(StatusCode::BAD_REQUEST, &format!("subprotocol {} required\n", proto::SUBPROTOCOL)));
     }
     response.headers_mut().insert("sec-websocket-protocol", HeaderValue::from_static(proto::SUBPROTOCOL));
     Ok(response)
 }
 
-async fn serve_client(stream: TcpStream, shared: &Arc<Shared>, mut shutdown: Shutdown) -> Result<(), String> {
+async fn serve_client(
+    stream: TcpStream,
+    shared: &Arc<Shared>,
+    ticket: &mut Ticket,
+    mut shutdown: Shutdown,
+) -> Result<(), String> {
     let config = WebSocketConfig::default()
         .max_message_size(Some(MAX_CLIENT_MESSAGE_BYTES))
         .max_frame_size(Some(MAX_CLIENT_MESSAGE_BYTES));
-    let handshake = tokio_tungstenite::accept_hdr_async_with_config(stream, select_subprotocol, Some(config));
-    let ws = tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake)
+    let (mut slot, mut refused) = (None, None);
+    #[allow(clippy::result_large_err)] // the signature tungstenite's callback requires
+    let callback =
+        |request: &Request, response: Response| admit_upgrade(shared, request, response, &mut slot, &mut refused);
+    // The whole upgrade (reading the request, writing the answer) runs under the request deadline.
+    let handshake = ticket
+        .read_request(tokio_tungstenite::accept_hdr_async_with_config(stream, callback, Some(config)))
         .await
-        .map_err(|_| "handshake timed out".to_string())?
-        .map_err(|e| format!("handshake: {e}"))?;
+        .map_err(|e| format!("no upgrade request: {e:?}"))?;
+    match refused {
+        Some(Refused::Token) => shared.gate.count_unauthorized(),
+        Some(Refused::Busy) => shared.gate.count_busy(),
+        None => {}
+    }
+    let ws = handshake.map_err(|e| format!("handshake: {e}"))?;
+    // Held for as long as the client is served.
+    let Some(_slot) = slot else { return Err("upgraded without a slot".into()) };
     let (mut sink, mut source) = ws.split();
     let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
     let (tx, mut rx) = mpsc::channel(CLIENT_QUEUE);

@@ -6,13 +6,17 @@
 //! `multipart/x-mixed-replace` stream of PNG parts, which Chrome and Firefox both render in an
 //! `<img>` (the way IP cameras stream MJPEG). Each response closes its connection.
 //!
-//! Bounds: at most [`MAX_CLIENTS`] connections at once (more get 503), request heads of at most
-//! 8 KiB (431), 5 s to send one, 10 s to take any one write; anything else the server cannot
-//! answer gets 400, 404 or 405.
+//! Bounds: every connection passes the gate at accept ([`crate::gate`]: a total and a
+//! per-address cap, the request deadline); only a connection whose request head is read takes
+//! one of [`MAX_CLIENTS`] serving slots (more get 503). Request heads of at most 8 KiB (431),
+//! 10 s to take any one write; anything else the server cannot answer gets 400, 404 or 405.
+//! With a token configured, a request without it gets 401 and one with a wrong one 403.
 
+use super::access::{Verdict, ViewAccess};
 use super::error::ViewError;
+use super::gate::{ConnCounts, Gate, Refusal};
 use super::hub::{SnapshotReceiver, ViewHub, ViewSnapshot};
-use super::request::{head_end, parse_head, Method, MAX_HEAD_BYTES};
+use super::request::{head_end, parse_head, Method, MAX_HEAD_BYTES, TOKEN_COOKIE};
 use super::Shutdown;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -24,53 +28,110 @@ use tokio::task::JoinHandle;
 
 /// Connections served at once (a stream holds one for as long as the page is open).
 pub const MAX_CLIENTS: usize = 8;
-const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 const BOUNDARY: &str = "starcframe";
 
 const INDEX_HTML: &str = include_str!("index.html");
 
-/// Binds `bind` and serves the live view until `shutdown` fires. Returns the address actually
-/// bound (port 0 picks a free one) and the server's task.
+/// A running browser view: its address and its connection counts.
+#[derive(Clone)]
+pub struct HttpServer {
+    addr: SocketAddr,
+    gate: Arc<Gate>,
+}
+
+impl HttpServer {
+    /// Binds `bind` and serves the live view until `shutdown` fires, under `access` (the
+    /// connection caps, and the token, which a bind beyond loopback must have). Returns the
+    /// server (port 0 picks a free one) and its task.
+    pub async fn start(
+        bind: SocketAddr,
+        hub: ViewHub,
+        access: &ViewAccess,
+        shutdown: Shutdown,
+    ) -> Result<(Self, JoinHandle<()>), ViewError> {
+        access.check_bind("http_bind", bind)?;
+        let listener =
+            TcpListener::bind(bind).await.map_err(|e| ViewError::io(format!("binding the live view on {bind}"), e))?;
+        let addr = listener.local_addr().map_err(|e| ViewError::io("reading the live view's address", e))?;
+        tracing::info!("live view on http://{addr}/{}", if access.token.is_some() { " (token required)" } else { "" });
+        let gate = Gate::new(access.limits);
+        let server =
+            Server { hub, access: access.clone(), gate: gate.clone(), slots: Arc::new(Semaphore::new(MAX_CLIENTS)) };
+        let task = tokio::spawn(accept_loop(listener, Arc::new(server), shutdown));
+        Ok((Self { addr, gate }, task))
+    }
+
+    /// The address actually bound.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Connections accepted, refused, cut and held so far.
+    pub fn connections(&self) -> ConnCounts {
+        self.gate.counts()
+    }
+}
+
+/// Binds `bind` and serves the live view until `shutdown` fires, with the default caps and no
+/// token (so only on loopback). Returns the address actually bound (port 0 picks a free one)
+/// and the server's task.
 pub async fn serve_http(
     bind: SocketAddr,
     hub: ViewHub,
     shutdown: Shutdown,
 ) -> Result<(SocketAddr, JoinHandle<()>), ViewError> {
-    let listener =
-        TcpListener::bind(bind).await.map_err(|e| ViewError::io(format!("binding the live view on {bind}"), e))?;
-    let local = listener.local_addr().map_err(|e| ViewError::io("reading the live view's address", e))?;
-    tracing::info!("live view on http://{local}/");
-    let task = tokio::spawn(accept_loop(listener, hub, shutdown));
-    Ok((local, task))
+    let (server, task) = HttpServer::start(bind, hub, &ViewAccess::default(), shutdown).await?;
+    Ok((server.local_addr(), task))
 }
 
-async fn accept_loop(listener: TcpListener, hub: ViewHub, mut shutdown: Shutdown) {
-    let slots = Arc::new(Semaphore::new(MAX_CLIENTS));
+struct Server {
+    hub: ViewHub,
+    access: ViewAccess,
+    gate: Arc<Gate>,
+    /// Serving slots, taken once a request is read.
+    slots: Arc<Semaphore>,
+}
+
+async fn accept_loop(listener: TcpListener, server: Arc<Server>, mut shutdown: Shutdown) {
     while let Some((stream, peer)) = super::next_connection(&listener, &mut shutdown, "live view").await {
-        let Ok(permit) = slots.clone().try_acquire_owned() else {
-            // One non-blocking write: a full server must not queue work for the clients it refuses.
-            let _ = stream.try_write(&status_response(503, "Service Unavailable", "too many viewers\n"));
-            continue;
+        let ticket = match server.gate.admit(peer.ip()) {
+            Ok(t) => t,
+            Err(refusal) => {
+                let why = match refusal {
+                    Refusal::Full => "too many connections\n",
+                    Refusal::PerAddress => "too many connections from your address\n",
+                };
+                // One non-blocking write: a full server must not queue work for the clients it refuses.
+                let _ = stream.try_write(&status_response(503, "Service Unavailable", why));
+                continue;
+            }
         };
-        let (hub, shutdown) = (hub.clone(), shutdown.clone());
+        let (server, shutdown) = (server.clone(), shutdown.clone());
         tokio::spawn(async move {
-            if let Err(e) = serve_connection(stream, hub, shutdown).await {
+            let mut ticket = ticket;
+            if let Err(e) = serve_connection(stream, &server, &mut ticket, shutdown).await {
                 tracing::debug!("live view: {peer}: {e}");
             }
-            drop(permit);
+            drop(ticket);
         });
     }
 }
 
-async fn serve_connection(mut stream: TcpStream, hub: ViewHub, shutdown: Shutdown) -> std::io::Result<()> {
+async fn serve_connection(
+    mut stream: TcpStream,
+    server: &Server,
+    ticket: &mut super::gate::Ticket,
+    shutdown: Shutdown,
+) -> std::io::Result<()> {
     let mut buf = Vec::with_capacity(1024);
-    let head = tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut stream, &mut buf)).await;
+    // Cut by the deadline or by eviction: closed without an answer, since a client that has
+    // not sent its request in time is not reading either.
+    let Ok(head) = ticket.read_request(read_head(&mut stream, &mut buf)).await else { return Ok(()) };
     let parsed = match head {
-        Err(_) => return Ok(()),
-        Ok(Err(e)) => return Err(e),
-        Ok(Ok(Err(e))) => Err(e),
-        Ok(Ok(Ok(end))) => parse_head(buf.get(..end).unwrap_or_default()),
+        Err(e) => return Err(e),
+        Ok(Err(e)) => Err(e),
+        Ok(Ok(end)) => parse_head(buf.get(..end).unwrap_or_default()),
     };
     let request = match parsed {
         Ok(r) => r,
@@ -79,9 +140,31 @@ async fn serve_connection(mut stream: TcpStream, hub: ViewHub, shutdown: Shutdow
             return write_all(&mut stream, &status_response(code, reason, &format!("{reason}\n"))).await;
         }
     };
+    let refusal = match server.access.verdict(request.token.as_deref()) {
+        Verdict::Allowed => None,
+        Verdict::Missing => Some(unauthorized_response()),
+        Verdict::Wrong => Some(status_response(403, "Forbidden", "wrong token\n")),
+    };
+    if let Some(response) = refusal {
+        server.gate.count_unauthorized();
+        return write_all(&mut stream, &response).await;
+    }
+    let Ok(_slot) = server.slots.clone().try_acquire_owned() else {
+        server.gate.count_busy();
+        return write_all(&mut stream, &status_response(503, "Service Unavailable", "too many viewers\n")).await;
+    };
+    let hub = &server.hub;
     let head_only = request.method == Method::Head;
     let response = match request.path.as_str() {
-        "/" | "/index.html" => ok_response("text/html; charset=utf-8", INDEX_HTML.as_bytes(), head_only),
+        "/" | "/index.html" => {
+            let mut page = ok_response("text/html; charset=utf-8", INDEX_HTML.as_bytes(), head_only);
+            if let (Some(token), Some(_)) = (&server.access.token, &request.token) {
+                // The page's own requests (the stream, the status, the fallback frames) are
+                // relative URLs without the token: the cookie carries it for them.
+                set_cookie(&mut page, &format!("{TOKEN_COOKIE}={}", token.as_str()));
+            }
+            page
+        }
         "/frame.png" => match hub.latest().map(|s| s.png()) {
             Some(Ok(png)) => ok_response("image/png", &png, head_only),
             Some(Err(e)) => status_response(500, "Internal Server Error", &format!("{e}\n")),
@@ -103,6 +186,26 @@ async fn serve_connection(mut stream: TcpStream, hub: ViewHub, shutdown: Shutdow
     write_all(&mut stream, &response).await?;
     let _ = stream.shutdown().await;
     Ok(())
+}
+
+fn unauthorized_response() -> Vec<u8> {
+    let body = "token required: open /?token=<token>\n";
+    format!(
+        "HTTP/1.1 401 Unauthorized\r\nWWW-Authenticate: Bearer realm=\"starc-view\"\r\n\
+         Content-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .into_bytes()
+}
+
+/// Adds a `Set-Cookie` header to a response built by [`ok_response`] (before its blank line).
+/// HttpOnly keeps it from scripts; SameSite=Strict keeps other sites' pages from using it.
+fn set_cookie(response: &mut Vec<u8>, cookie: &str) {
+    let header = format!("Set-Cookie: {cookie}; Path=/; HttpOnly; SameSite=Strict\r\n");
+    if let Some(end) = response.windows(4).position(|w| w == b"\r\n\r\n") {
+        let at = end + 2;
+        response.splice(at..at, header.into_bytes());
+    }
 }
 
 /// Reads until the end of the head; `Ok(Err(..))` for a head the server refuses.

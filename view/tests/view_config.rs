@@ -15,6 +15,17 @@ fn the_shipped_example_loads_and_typos_are_refused() {
     assert_eq!(shipped.foxglove_bind, Some("127.0.0.1:8765".parse().unwrap()));
     assert_eq!(shipped.framebuffer, None);
     assert_eq!(shipped.png_every, 10);
+    // The caps as shipped are the defaults; no token ships (loopback needs none).
+    let defaults = ViewConfig::default();
+    assert_eq!(shipped.token, None);
+    assert_eq!(
+        (shipped.max_connections, shipped.max_connections_per_address, shipped.request_timeout_ms),
+        (defaults.max_connections, defaults.max_connections_per_address, defaults.request_timeout_ms)
+    );
+    assert_eq!(
+        (defaults.max_connections, defaults.max_connections_per_address, defaults.request_timeout_ms),
+        (64, 8, 3000)
+    );
     assert_eq!(ViewConfig::from_toml("").unwrap(), ViewConfig::default());
     assert!(ViewConfig::from_toml("http_bnd = \"127.0.0.1:1\"").is_err());
     assert!(ViewConfig::from_toml("png_every = 0").is_err());
@@ -37,6 +48,7 @@ async fn start_views_runs_every_output_and_stops_them() {
         png_dir: Some(dir.path().join("frames")),
         png_every: 2,
         framebuffer: None,
+        ..ViewConfig::default()
     };
     let hub = ViewHub::new();
     let (stop, shutdown) = tokio::sync::watch::channel(false);

@@ -7,7 +7,7 @@
 
 use serde_json::Value;
 use starc_pipeline::ar::ArFrame;
-use starc_view::{serve_http, ViewHub, ViewStatus};
+use starc_view::{serve_http, ConnLimits, HttpServer, ViewAccess, ViewHub, ViewStatus};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
@@ -58,6 +58,7 @@ struct Server {
     hub: ViewHub,
     addr: SocketAddr,
     _stop: tokio::sync::watch::Sender<bool>,
+    http: Option<HttpServer>,
 }
 
 fn start() -> Server {
@@ -65,7 +66,20 @@ fn start() -> Server {
     let hub = ViewHub::new();
     let (stop, shutdown) = tokio::sync::watch::channel(false);
     let (addr, _task) = rt.block_on(serve_http("127.0.0.1:0".parse().unwrap(), hub.clone(), shutdown)).unwrap();
-    Server { rt, hub, addr, _stop: stop }
+    Server { rt, hub, addr, _stop: stop, http: None }
+}
+
+/// A server whose per-address cap is above its serving slots, so that viewers all on 127.0.0.1
+/// meet the slots first.
+fn start_wide_open() -> Server {
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+    let hub = ViewHub::new();
+    let (stop, shutdown) = tokio::sync::watch::channel(false);
+    let access =
+        ViewAccess { limits: ConnLimits { max_per_address: 64, ..ConnLimits::default() }, ..ViewAccess::default() };
+    let (http, _task) =
+        rt.block_on(HttpServer::start("127.0.0.1:0".parse().unwrap(), hub.clone(), &access, shutdown)).unwrap();
+    Server { rt, hub, addr: http.local_addr(), _stop: stop, http: Some(http) }
 }
 
 /// curl's body (to `out` if given) and "<code> <content type>".
@@ -191,7 +205,7 @@ fn the_stream_delivers_new_frames_as_png_parts() {
 
 #[test]
 fn viewers_are_bounded_and_a_stalled_one_holds_up_nobody() {
-    let server = start();
+    let server = start_wide_open();
     server.hub.publish(&frame(32, 24, 0), status(0)).unwrap();
     let mut streams = Vec::new();
     for _ in 0..starc_view::http::MAX_CLIENTS {
@@ -203,7 +217,11 @@ fn viewers_are_bounded_and_a_stalled_one_holds_up_nobody() {
         assert_eq!(&first, b"HTTP/1.1 200");
         streams.push(s);
     }
-    assert!(raw(server.addr, b"GET / HTTP/1.1\r\n\r\n").starts_with("HTTP/1.1 503 "), "one viewer too many");
+    let refused = raw(server.addr, b"GET / HTTP/1.1\r\n\r\n");
+    assert!(refused.starts_with("HTTP/1.1 503 ") && refused.ends_with("too many viewers\n"), "one viewer too many");
+    // Refused for want of a serving slot, after its request was read; not at accept.
+    let c = server.http.as_ref().unwrap().connections();
+    assert_eq!((c.busy, c.refused_full, c.refused_per_address), (1, 0, 0), "{c:?}");
 
     // All but one viewer leave; the one left never reads again. Big noisy frames fill its
     // socket while the renderer goes on publishing.

@@ -10,7 +10,14 @@ pub struct DecoderStats {
     pub bytes: u64,
     /// Frames (WitMotion) or packets (MIP) that passed their checksum.
     pub frames: u64,
+    /// Samples handed out (every rate and acceleration finite).
     pub samples: u64,
+    /// Samples dropped because a rate or an acceleration was NaN or infinite (a MIP device
+    /// sends raw f32s; one NaN would poison the LIO's state).
+    pub non_finite: u64,
+    /// Samples handed out without their orientation (quaternion or Euler angles), which held a
+    /// NaN or an infinity; their rates and accelerations were finite.
+    pub non_finite_orientation: u64,
     /// Data without both gyro and accel.
     pub incomplete: u64,
     /// MIP replies (ACK/NACK) decoded.

@@ -1,6 +1,7 @@
 //! What both stream decoders share: a bounded buffer over the byte stream, the skip and resync
 //! counters, and the time stamps of the reads.
 
+use crate::sample::{ImuEvent, ImuSample};
 use crate::stats::DecoderStats;
 use crate::timing::Timestamper;
 use starc_time::Stamp;
@@ -86,6 +87,30 @@ impl StreamCore {
     /// Whether the last bytes consumed were a good frame (no skip since).
     pub fn synced(&self) -> bool {
         !self.in_gap && self.stats.frames > 0
+    }
+
+    /// Hands `sample` out and counts it, unless a rate or an acceleration is NaN or infinite:
+    /// then it is dropped and counted (`non_finite`). A non-finite orientation only loses the
+    /// orientation (`non_finite_orientation`): the LIO needs the rates, not the device's filter.
+    /// The raw values stay as the device sent them.
+    pub fn deliver(&mut self, mut sample: ImuSample, out: &mut Vec<ImuEvent>) {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !(finite(&sample.gyro_rad_s) && finite(&sample.accel_m_s2)) {
+            self.stats.non_finite += 1;
+            return;
+        }
+        let mut trimmed = false;
+        if sample.orientation_wxyz.is_some_and(|q| !finite(&q)) {
+            sample.orientation_wxyz = None;
+            trimmed = true;
+        }
+        if sample.euler_rad.is_some_and(|e| !finite(&e)) {
+            sample.euler_rad = None;
+            trimmed = true;
+        }
+        self.stats.non_finite_orientation += u64::from(trimmed);
+        self.stats.samples += 1;
+        out.push(ImuEvent::Sample(sample));
     }
 
     /// Host arrival of the byte at buffer position `pos`.

@@ -151,6 +151,39 @@ fn mip_samples_are_in_si_units_with_raw_values_kept() {
 }
 
 #[test]
+fn mip_nan_and_infinite_readings_are_dropped_and_counted() {
+    let good = |k: u32| MipData { quaternion: Some([1.0, 0.0, 0.0, 0.0]), ..mip_data(k) };
+    let packets = [
+        good(0),
+        MipData { gyro_rad_s: Some([f32::NAN, 0.0, 0.0]), ..good(1) },
+        MipData { accel_g: Some([0.0, f32::INFINITY, -1.0]), ..good(2) },
+        MipData { accel_g: Some([0.0, 0.0, f32::NEG_INFINITY]), gyro_rad_s: Some([f32::NAN; 3]), ..good(3) },
+        // Rates fine, the device's orientation not: the sample goes out without it.
+        MipData { quaternion: Some([f32::NAN, 0.0, 0.0, 0.0]), euler_rad: Some([0.0, f32::INFINITY, 0.0]), ..good(4) },
+        good(5),
+    ];
+    let mut bytes = Vec::new();
+    for p in &packets {
+        p.encode(&mut bytes).unwrap();
+    }
+    let mut d = ImuDecoder::new(Protocol::Mip, no_latency());
+    let events = push_chunked(&mut d, &bytes, &mut Rng::new(3), 40);
+    let out = samples(&events);
+    assert_eq!(out.iter().map(|s| mip_tow_index(s)).collect::<Vec<_>>(), vec![0, 4, 5]);
+    for s in &out {
+        assert!(s.gyro_rad_s.iter().chain(s.accel_m_s2.iter()).all(|v| v.is_finite()), "{s:?}");
+        assert!(s.orientation_wxyz.is_none_or(|q| q.iter().all(|v| v.is_finite())));
+        assert!(s.euler_rad.is_none_or(|e| e.iter().all(|v| v.is_finite())));
+    }
+    assert_eq!(
+        (out[0].orientation_wxyz, out[1].orientation_wxyz, out[1].euler_rad),
+        (Some([1.0, 0.0, 0.0, 0.0]), None, None)
+    );
+    let st = d.stats();
+    assert_eq!((st.samples, st.non_finite, st.non_finite_orientation, st.frames), (3, 3, 1, 6));
+}
+
+#[test]
 fn mip_replies_incomplete_unknown_and_malformed_packets() {
     let mut bytes = Vec::new();
     MipReply::ack(DM3_SET, CMD_IMU_BASE_RATE, Some(ReplyData::ImuBaseRate(1000))).encode(&mut bytes).unwrap();

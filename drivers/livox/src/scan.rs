@@ -47,11 +47,27 @@ pub struct ScanConfig {
     pub decimation: u32,
     /// Keep only lines below this (FAST-LIO's N_SCANS; 6 on the Avia).
     pub lines: u8,
+    /// Kept points per second of scan at most: a scan holds at most this times its period
+    /// ([`ScanConfig::max_points`]); points beyond are cut and counted. An Avia fires at most
+    /// 720,000 returns/s (triple return), so only a broken or hostile sender (one repeating a
+    /// time stamp, which would grow one scan for ever) reaches the default.
+    pub max_points_per_s: u32,
 }
+
+/// Default of [`ScanConfig::max_points_per_s`]: 1.4 times an Avia's triple-return rate.
+pub const DEFAULT_MAX_POINTS_PER_S: u32 = 1_000_000;
 
 impl Default for ScanConfig {
     fn default() -> Self {
-        Self { period_ms: 100.0, tags: TagFilter::FastLio, blind_m: 0.5, max_range_m: 0.0, decimation: 1, lines: 6 }
+        Self {
+            period_ms: 100.0,
+            tags: TagFilter::FastLio,
+            blind_m: 0.5,
+            max_range_m: 0.0,
+            decimation: 1,
+            lines: 6,
+            max_points_per_s: DEFAULT_MAX_POINTS_PER_S,
+        }
     }
 }
 
@@ -67,11 +83,21 @@ impl ScanConfig {
         if self.blind_m.is_nan() || self.max_range_m.is_nan() || self.blind_m < 0.0 || self.max_range_m < 0.0 {
             return Err("scan.blind_m and scan.max_range_m must be >= 0".into());
         }
+        if self.max_points_per_s == 0 {
+            return Err("scan.max_points_per_s must be at least 1".into());
+        }
         Ok(())
     }
 
     pub fn period_ns(&self) -> u64 {
         (self.period_ms * 1e6).round() as u64
+    }
+
+    /// Points one scan holds at most: `max_points_per_s` over the period, rounded up, at least 1.
+    pub fn max_points(&self) -> usize {
+        let n = (f64::from(self.max_points_per_s) * self.period_ms * 1e-3).ceil();
+        // period_ms <= 10 000 (validate) keeps n below 2^32 * 10: no saturation in practice.
+        (n as usize).max(1)
     }
 }
 
@@ -136,12 +162,20 @@ pub struct ScanAssembler {
     gaps: GapDetector,
     scratch: Vec<Point>,
     late_packets: u64,
+    /// `config.max_points()`, computed once.
+    max_points: usize,
+    /// Whether the scan in progress has been cut at `max_points` (it is counted once).
+    current_cut: bool,
+    cut_points: u64,
+    cut_scans: u64,
+    non_finite_points: u64,
 }
 
 impl ScanAssembler {
     pub fn new(config: ScanConfig) -> Result<Self, String> {
         config.validate()?;
         let period_ns = config.period_ns();
+        let max_points = config.max_points();
         Ok(Self {
             config,
             period_ns,
@@ -150,6 +184,11 @@ impl ScanAssembler {
             gaps: GapDetector::new(),
             scratch: Vec::new(),
             late_packets: 0,
+            max_points,
+            current_cut: false,
+            cut_points: 0,
+            cut_scans: 0,
+            non_finite_points: 0,
         })
     }
 
@@ -198,8 +237,25 @@ impl ScanAssembler {
                 count_packet(scan, counts, gap, host_receive);
                 counted_packet = true;
             }
+            if !(p.x_m.is_finite() && p.y_m.is_finite() && p.z_m.is_finite()) {
+                // Wire points are integers and always finite; points handed in decoded by
+                // someone else may not be, and one NaN poisons the LIO's map.
+                self.non_finite_points += 1;
+                scan.filtered += 1;
+                continue;
+            }
             if !keep(&self.config, p, &mut self.decimation_counter) {
                 scan.filtered += 1;
+                continue;
+            }
+            if scan.points.len() >= self.max_points {
+                // A scan only gets here when its sender keeps stamping into one period (a
+                // repeated time stamp): keep what it has, never grow it further.
+                self.cut_points += 1;
+                if !self.current_cut {
+                    self.current_cut = true;
+                    self.cut_scans += 1;
+                }
                 continue;
             }
             scan.points.push(ScanPoint {
@@ -240,6 +296,7 @@ impl ScanAssembler {
             done.extend(self.current.take());
         }
         self.current = Some(Scan::empty_at(self.aligned_start(t), self.period_ns));
+        self.current_cut = false;
         true
     }
 
@@ -257,13 +314,34 @@ impl ScanAssembler {
     pub fn late_packets(&self) -> u64 {
         self.late_packets
     }
+
+    /// Points dropped because their scan already held [`ScanConfig::max_points`].
+    pub fn cut_points(&self) -> u64 {
+        self.cut_points
+    }
+
+    /// Scans that reached [`ScanConfig::max_points`] and were cut there.
+    pub fn cut_scans(&self) -> u64 {
+        self.cut_scans
+    }
+
+    /// Points with a NaN or infinite coordinate, dropped (counted in their scan's `filtered` too).
+    pub fn non_finite_points(&self) -> u64 {
+        self.non_finite_points
+    }
+
+    /// Points held by the scan in progress (never more than [`ScanConfig::max_points`]).
+    pub fn pending_points(&self) -> usize {
+        self.current.as_ref().map_or(0, |s| s.points.len())
+    }
 }
 
 fn count_packet(scan: &mut Scan, counts: ReturnCounts, gap: Option<Gap>, host_receive: Option<Stamp>) {
-    scan.packets += 1;
-    scan.returns += u64::from(counts.returns);
-    scan.empty += u64::from(counts.empty);
-    scan.lost_packets += gap.map_or(0, |g| g.lost_packets);
+    // Saturating: a sender repeating one time stamp feeds one scan for as long as it likes.
+    scan.packets = scan.packets.saturating_add(1);
+    scan.returns = scan.returns.saturating_add(u64::from(counts.returns));
+    scan.empty = scan.empty.saturating_add(u64::from(counts.empty));
+    scan.lost_packets = scan.lost_packets.saturating_add(gap.map_or(0, |g| g.lost_packets));
     scan.last_host_receive = host_receive.or(scan.last_host_receive);
 }
 
@@ -286,7 +364,7 @@ fn keep(config: &ScanConfig, p: &Point, decimation_counter: &mut u32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::{encode_point_packet, DataHeader, DataType, Return, StatusWord};
+    use crate::data::{encode_point_packet, DataHeader, DataType, Point, Return, ReturnCounts, StatusWord};
     use starc_time::Clock;
 
     fn packet_bytes(ts_ns: u64, tag: u8, x_m: f32) -> Vec<u8> {
@@ -378,6 +456,74 @@ mod tests {
         assert_eq!(a.late_packets(), 1);
         assert_eq!(done.iter().map(|s| s.points.len()).sum::<usize>(), 499 * 96);
         assert!(done.iter().all(|s| s.points.iter().all(|p| u64::from(p.offset_ns) < s.period_ns)));
+    }
+
+    #[test]
+    fn a_repeated_time_stamp_cannot_grow_a_scan_past_its_cap() {
+        // 20 000 packets all stamped 5 s: without the cap, one scan of 1.92 million points.
+        let config = ScanConfig::default();
+        let cap = config.max_points();
+        assert_eq!(cap, 100_000);
+        let Ok(mut a) = ScanAssembler::new(config) else { return };
+        let bytes = packet_bytes(5_000_000_000, 0, 3.0);
+        let Ok(p) = DataPacket::parse(&bytes) else { return };
+        let mut done = Vec::new();
+        for _ in 0..20_000 {
+            a.push(&p, None, &mut done);
+            assert!(a.pending_points() <= cap);
+        }
+        assert!(done.is_empty());
+        assert_eq!(a.pending_points(), cap);
+        assert_eq!(a.cut_points(), 20_000 * 96 - cap as u64);
+        assert_eq!(a.cut_scans(), 1);
+        // The next period starts a fresh scan, uncut; the cut one comes out with its packets.
+        let next = packet_bytes(5_100_000_000, 0, 3.0);
+        if let Ok(p) = DataPacket::parse(&next) {
+            a.push(&p, None, &mut done);
+        }
+        assert_eq!(done.len(), 1);
+        assert_eq!((done[0].points.len(), done[0].packets), (cap, 20_000));
+        assert_eq!(a.pending_points(), 96);
+        assert_eq!(a.cut_scans(), 1);
+    }
+
+    #[test]
+    fn the_cap_scales_with_the_period_and_is_configurable() {
+        let long = ScanConfig { period_ms: 1000.0, ..ScanConfig::default() };
+        assert_eq!(long.max_points(), 1_000_000);
+        let small = ScanConfig { max_points_per_s: 1000, ..ScanConfig::default() };
+        assert_eq!(small.max_points(), 100);
+        let packets: Vec<Vec<u8>> = (0..10u64).map(|i| packet_bytes(i * 400_000, 0, 3.0)).collect();
+        let scans = run(small, &packets);
+        assert_eq!(scans.iter().map(|s| s.points.len()).collect::<Vec<_>>(), vec![100]);
+        assert!(ScanAssembler::new(ScanConfig { max_points_per_s: 0, ..ScanConfig::default() }).is_err());
+    }
+
+    #[test]
+    fn non_finite_points_are_dropped_and_counted() {
+        let Ok(mut a) = ScanAssembler::new(ScanConfig::default()) else { return };
+        let header = DataHeader {
+            version: 5,
+            slot: 1,
+            lidar_id: 1,
+            status: StatusWord::from_raw(0),
+            data_type: DataType::ExtendedCartesian,
+            timestamp: Stamp::new(0, Clock::Ptp),
+        };
+        let good = Point { x_m: 3.0, y_m: 1.0, z_m: 0.5, ..Point::default() };
+        let points = [
+            good,
+            Point { x_m: f32::NAN, ..good },
+            Point { y_m: f32::INFINITY, ..good },
+            Point { z_m: f32::NEG_INFINITY, ..good },
+            good,
+        ];
+        let mut done = Vec::new();
+        a.push_points(&header, &points, ReturnCounts { returns: 5, empty: 0 }, None, &mut done);
+        done.extend(a.finish());
+        assert_eq!(a.non_finite_points(), 3);
+        assert_eq!((done[0].points.len(), done[0].filtered), (2, 3));
+        assert!(done[0].points.iter().all(|p| p.x_m.is_finite() && p.y_m.is_finite() && p.z_m.is_finite()));
     }
 
     #[test]

@@ -127,10 +127,7 @@ fn handle(
             Ok(data) => {
                 core.stats.unknown += u64::from(data.unknown_fields);
                 match sample(&data, core.timestamper.measured(arrival, len), arrival) {
-                    Some(s) => {
-                        core.stats.samples += 1;
-                        out.push(ImuEvent::Sample(s));
-                    }
+                    Some(s) => core.deliver(s, out),
                     None => {
                         core.stats.incomplete += 1;
                         out.push(ImuEvent::Incomplete(Incomplete { host_receive: arrival, raw: RawSample::Mip(data) }));

@@ -242,10 +242,8 @@ fn emit(core: &mut StreamCore, cycle: &mut Cycle, last_arrival: Stamp, out: &mut
     cycle.last_type = None;
     let (stamp, _) = first.unwrap_or((last_arrival, last_arrival));
     match sample(&group, stamp, last_arrival) {
-        Some(s) => {
-            core.stats.samples += 1;
-            out.push(ImuEvent::Sample(s));
-        }
+        // WitMotion values are scaled i16s, always finite; checked all the same.
+        Some(s) => core.deliver(s, out),
         None => {
             core.stats.incomplete += 1;
             out.push(ImuEvent::Incomplete(Incomplete { host_receive: last_arrival, raw: RawSample::WitMotion(group) }));

@@ -226,6 +226,11 @@ pub struct ImuSample {
 }
 
 impl ImuSample {
+    /// Whether every rate and acceleration is a finite number.
+    pub fn is_finite(&self) -> bool {
+        self.gyro_rad_s.iter().chain(self.acc_g.iter()).all(|v| v.is_finite())
+    }
+
     pub fn acc_m_s2(&self) -> [f32; 3] {
         self.acc_g.map(|a| a * STANDARD_GRAVITY_M_S2)
     }
@@ -281,7 +286,15 @@ impl<'a> DataPacket<'a> {
         self.header.data_type == DataType::Imu
     }
 
+    /// The IMU sample of an IMU packet; `None` for point packets and for samples holding a NaN
+    /// or an infinity (the wire carries raw f32s, and one NaN poisons the LIO's state): see
+    /// [`DataPacket::imu_raw`] for the values as sent.
     pub fn imu(&self) -> Option<ImuSample> {
+        self.imu_raw().filter(ImuSample::is_finite)
+    }
+
+    /// The IMU sample as sent, non-finite values included.
+    pub fn imu_raw(&self) -> Option<ImuSample> {
         if !self.is_imu() {
             return None;
         }
@@ -695,6 +708,27 @@ mod tests {
         let imu = p.and_then(|p| p.imu());
         assert_eq!(imu, Some(s));
         assert_eq!(imu.map(|i| i.acc_m_s2()[2]), Some(STANDARD_GRAVITY_M_S2));
+    }
+
+    #[test]
+    fn imu_samples_with_nan_or_infinity_are_not_handed_out() {
+        let h = header(DataType::Imu, Clock::Device);
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for k in 0..6 {
+                let mut s = ImuSample { gyro_rad_s: [0.1, -0.2, 0.3], acc_g: [0.0, 0.0, 1.0] };
+                if k < 3 {
+                    s.gyro_rad_s[k] = bad;
+                } else {
+                    s.acc_g[k - 3] = bad;
+                }
+                let mut bytes = Vec::new();
+                assert!(encode_imu_packet(&h, &s, &mut bytes).is_ok());
+                let Ok(p) = DataPacket::parse(&bytes) else { panic!("an IMU packet with {bad} parses") };
+                assert!(p.is_imu());
+                assert_eq!(p.imu(), None, "value {k} = {bad}");
+                assert!(p.imu_raw().is_some_and(|r| !r.is_finite()));
+            }
+        }
     }
 
     #[test]
