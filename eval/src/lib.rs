@@ -25,6 +25,7 @@
 
 pub mod batch;
 pub mod detection;
+pub mod drift;
 pub mod error;
 pub mod offline;
 pub mod overlay;

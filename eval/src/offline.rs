@@ -35,6 +35,9 @@ pub struct Offline {
     pub lidar_t_camera: Isometry3<f64>,
     pub start: Start,
     pub start_gate_m: f64,
+    /// The rig's acceptance judges the overlap with the robot's coverage (see
+    /// `OfflineMission::with_coverage`).
+    pub coverage: bool,
     /// The robot's core (its LIO, detector and the filters on what it sends).
     pub robot: RobotCoreConfig,
     /// With the simulator's truth: the camera frames rendered and scored into report.json.
@@ -57,6 +60,7 @@ impl Offline {
             lidar_t_camera: truth.mount.lidar_t_camera,
             start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
             start_gate_m: 2.0,
+            coverage: true,
             robot: RobotCoreConfig::default(),
             truth: Some(truth),
             wall_timing,
@@ -140,7 +144,8 @@ impl Run {
             hold_ns: HOLD_NS,
         };
         let mut mission =
-            OfflineMission::new(RobotCore::new(robot_cfg).map_err(pipeline)?, RigSide::new(rig_cfg).map_err(pipeline)?);
+            OfflineMission::new(RobotCore::new(robot_cfg).map_err(pipeline)?, RigSide::new(rig_cfg).map_err(pipeline)?)
+                .with_coverage(cfg.coverage);
         let hint_set = match cfg.start {
             Start::At(p) => {
                 mission.rig_mut().core_mut().set_start_hint(p);
@@ -170,9 +175,10 @@ impl Run {
 
     fn take(&mut self, ev: MissionEvent) {
         match ev {
-            MissionEvent::RobotPose { end_ns, pose, lio_ms } => {
+            MissionEvent::RobotPose { end_ns, pose, lio_ms, health } => {
                 if let Some(sc) = self.score.as_mut() {
                     sc.robot_pose(end_ns, &pose);
+                    sc.robot_health(end_ns, health);
                 }
                 self.robot_tum.push(tum_line(end_ns, &pose));
                 self.slam_ms.push(lio_ms);

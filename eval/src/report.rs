@@ -101,6 +101,9 @@ pub struct RobotPoseErrorReport {
     /// The root mean square of the translation errors over every pose (NaN, written null,
     /// without any).
     pub rmse_m: f64,
+    /// Stretches where the error grew by more than 10 cm within 5 s, and how many of them the
+    /// LIO's health never flagged (offline runs, which report the health).
+    pub drift: Option<crate::drift::DriftReport>,
 }
 
 #[derive(Debug, Default, Serialize)]

@@ -9,6 +9,7 @@
 //! [`Scorer::rig_started`], [`Scorer::alignment`], [`Scorer::frame`]; all times are PTP ns.
 
 use crate::detection::{box_returns, truth_in_world};
+use crate::drift::{drift_stretches, DriftReport, ScoredPose};
 use crate::error::{write, EvalError, Result};
 use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
 use crate::plots::write_plots;
@@ -22,9 +23,15 @@ use nalgebra::Isometry3;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule};
+use starc_pipeline::lio::Health;
 use starc_pipeline::mission::{RobotDetection, View};
 use std::collections::VecDeque;
 use std::path::Path;
+
+/// A drift stretch: the robot's pose error growing by more than this within this long (the
+/// odometry issue's test: every such stretch must be flagged degraded or worse).
+const DRIFT_GROW_M: f64 = 0.10;
+const DRIFT_WINDOW_NS: u64 = 5_000_000_000;
 
 /// A camera frame whose overlay waits for the robot's detections to pass its time.
 struct PendingFrame {
@@ -62,6 +69,9 @@ pub struct Scorer {
     projected: Vec<ProjectedPoint>,
     /// The robot's newest pose: its detections up to here have all come in.
     robot_ns: Option<u64>,
+    /// Each robot pose's time and error, and the LIO's health when the run reports it.
+    robot_series: Vec<(u64, f64)>,
+    robot_health: Vec<(u64, Health)>,
     detected: DetectedLog,
     pending: VecDeque<PendingFrame>,
     overlay: OverlayTally,
@@ -96,6 +106,8 @@ impl Scorer {
             ],
             projected: Vec::new(),
             robot_ns: None,
+            robot_series: Vec::new(),
+            robot_health: Vec::new(),
             detected: DetectedLog::default(),
             pending: VecDeque::new(),
             overlay: OverlayTally::default(),
@@ -109,8 +121,30 @@ impl Scorer {
         let l_t_w = *self.lio_t_world.get_or_insert_with(|| lidar_pose * truth.inverse());
         let (m, deg) = pose_error(&(l_t_w * truth), lidar_pose);
         self.robot_err_m.push(m);
+        self.robot_series.push((end_ns, m));
         self.robot_err_deg.push(deg);
         self.robot_ns = Some(self.robot_ns.map_or(end_ns, |t| t.max(end_ns)));
+    }
+
+    /// The robot LIO's health at a scored pose (offline runs report it; see [`crate::drift`]).
+    pub fn robot_health(&mut self, end_ns: u64, health: Health) {
+        self.robot_health.push((end_ns, health));
+    }
+
+    /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
+    fn drift(&self) -> Option<DriftReport> {
+        if self.robot_health.is_empty() {
+            return None;
+        }
+        let poses: Vec<ScoredPose> = self
+            .robot_series
+            .iter()
+            .filter_map(|&(t_ns, error_m)| {
+                let (_, health) = self.robot_health.iter().find(|(t, _)| *t == t_ns)?;
+                Some(ScoredPose { t_ns, error_m, health: *health })
+            })
+            .collect();
+        Some(drift_stretches(&poses, DRIFT_WINDOW_NS, DRIFT_GROW_M))
     }
 
     /// The rig's first LIO pose (alignment times count from it).
@@ -321,6 +355,7 @@ impl Scorer {
                 translation_m: quantiles(&self.robot_err_m),
                 rotation_deg: quantiles(&self.robot_err_deg),
                 rmse_m: rmse(&self.robot_err_m),
+                drift: self.drift(),
             },
             latency_ms: latency,
             memory,

@@ -8,11 +8,11 @@ use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::LivoxDriver;
-use starc_pipeline::detect::WindowPoint;
-use starc_pipeline::mission::{people_to_send, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep};
+use starc_pipeline::mission::{
+    people_to_send, MapScan, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep,
+};
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 
@@ -154,14 +154,14 @@ fn scan_of(scans: &VecDeque<(u64, Clock, u64)>, end_ns: u64) -> (Clock, u64) {
 }
 
 type MapThread = std::thread::JoinHandle<Result<()>>;
-type PlacedScans = std::sync::mpsc::Sender<Arc<Vec<WindowPoint>>>;
+type PlacedScans = std::sync::mpsc::Sender<MapScan>;
 type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
 
 /// The map grown on its own thread from the placed scans the node hands it: growing it and
 /// encoding tiles (several milliseconds a second) never hold up a scan or a detection. Every
 /// `period` it sends the changed tiles, and the last ones once the node hangs up.
 fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, EncodedTiles, MapThread)> {
-    let (scans_tx, scans_rx) = std::sync::mpsc::channel::<Arc<Vec<WindowPoint>>>();
+    let (scans_tx, scans_rx) = std::sync::mpsc::channel::<MapScan>();
     let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
     let thread = std::thread::Builder::new()
         .name("robot-map".into())
@@ -169,7 +169,7 @@ fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, Encode
             let mut next = Instant::now() + period;
             loop {
                 match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
-                    Ok(placed) => map.add(&placed),
+                    Ok(placed) => map.add_scan(&placed),
                     Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
                     Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
                 }
@@ -177,7 +177,7 @@ fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, Encode
                     next = (next + period).max(Instant::now());
                     // Everything the node has handed over by now goes into these tiles.
                     while let Ok(placed) = scans_rx.try_recv() {
-                        map.add(&placed);
+                        map.add_scan(&placed);
                     }
                     let _ = tiles_tx.send(map.take_changed_tiles()?);
                 }

@@ -77,6 +77,9 @@ fn main() {
             }
             if core.wants_map() && rc.map_len() != core.map_len() {
                 core.set_map(rc.map_points());
+                if std::env::var("NO_COVERAGE").is_err() {
+                    core.set_coverage(rc.map_coverage());
+                }
             }
             let Some(job) = core.next_job(Vec::new) else { continue };
             let end = job.end_ns;
@@ -213,5 +216,7 @@ fn fit(a: &Attempt) -> String {
         m.update_norm,
         m.degeneracy_index,
         a.free_space.as_ref().map_or("-".to_string(), |f| format!("{:.3}", f.blocked_ratio))
-    )
+    ) + &a
+        .overlap
+        .map_or(String::new(), |o| format!(" ovl {}/{}/{} r {:.3}", o.explained, o.contradicted, o.points, o.ratio()))
 }

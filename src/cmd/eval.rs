@@ -55,6 +55,10 @@ pub struct Args {
     /// brings.
     #[arg(long)]
     no_wheels: bool,
+    /// Judge the rig's alignments on its whole window instead of the part the robot's coverage
+    /// can judge (to measure what coverage brings).
+    #[arg(long)]
+    no_coverage: bool,
     /// Buildings run at once (default: one per core offline, one live).
     #[arg(long)]
     jobs: Option<usize>,
@@ -253,6 +257,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             lidar_t_camera: truth.mount.lidar_t_camera,
             start,
             start_gate_m,
+            coverage: !args.no_coverage,
             robot: robot_config(args),
             truth: Some(truth),
             wall_timing: true,

@@ -95,7 +95,7 @@ impl DeviceRun {
         writeln!(
             table,
             "end_s,health,refused,matched,rms_m,degeneracy_index,weak_directions,iterations,points_in,\
-             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us,wheel"
+             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us,wheel,weak_axes"
         )?;
         let dump = if dump {
             let mut w = create(&out.join(format!("{name}_scans.bin")))?;
@@ -167,7 +167,7 @@ impl DeviceRun {
             writeln!(self.tum, "{}", tum_line(o.end_ns, &o.lidar_pose))?;
             writeln!(
                 self.table,
-                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{},{}",
+                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{},{},{}",
                 o.end_ns / 1_000_000_000,
                 o.end_ns % 1_000_000_000,
                 o.health.name(),
@@ -183,7 +183,8 @@ impl DeviceRun {
                 o.pos_sigma_m,
                 o.yaw_sigma_deg,
                 o.elapsed_us,
-                o.wheel.name()
+                o.wheel.name(),
+                starc_pipeline::lio::weak_axes_names(o.update.weak_axes)
             )?;
             self.outputs.push(o);
         }
@@ -456,7 +457,7 @@ fn finish(dev: &mut DeviceRun, out: &Path) -> anyhow::Result<DeviceSummary> {
     let mut sizes: Vec<usize> = dev.outputs.iter().map(|o| o.points_in).collect();
     sizes.sort_unstable();
     let mut health = BTreeMap::new();
-    for h in [Health::Tracking, Health::Degenerate, Health::ImuOnly, Health::Lost] {
+    for h in Health::ALL {
         health.insert(h.name(), dev.outputs.iter().filter(|o| o.health == h).count() as u64);
     }
     let (scans_refused, times_lost) = dev.lio.health_counts();

@@ -46,6 +46,10 @@ pub struct Args {
     /// `walker_min_height_m`, 0.8 by default; 0 draws their legs too).
     #[arg(long)]
     pub walker_min_height_m: Option<f64>,
+    /// Judge the rig's alignments on its whole window instead of the part the robot's coverage
+    /// can judge (to measure what coverage brings).
+    #[arg(long)]
+    pub no_coverage: bool,
     /// Leave the base's wheel odometry (the run's robot_can.log) out of the robot's LIO.
     #[arg(long)]
     pub no_wheels: bool,
@@ -67,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => Start::Anywhere,
         },
         start_gate_m: args.start_gate_m,
+        coverage: !args.no_coverage,
         robot: RobotCoreConfig {
             walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),
             ..RobotCoreConfig::default()

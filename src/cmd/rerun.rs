@@ -78,6 +78,7 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
         camera: camera.model,
         start,
         start_gate_m: cfg.as_ref().map_or(2.0, |c| c.start_gate_m),
+        coverage: true,
         robot: RobotCoreConfig::default(),
         truth: None,
         wall_timing: !args.no_wall_timing,

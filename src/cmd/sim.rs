@@ -129,6 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint_m: Some(1.0),
             start_hint_deg: 20.0,
             start_gate_m: 2.0,
+            no_coverage: false,
             walker_min_height_m: None,
             no_wheels: false,
         })?;

@@ -45,6 +45,13 @@ pub struct AlignConfig {
     pub max_rms_m: f64,
     /// Acceptance: inlier ratio (inliers over all reduced source points), at least.
     pub min_inlier_ratio: f64,
+    /// Acceptance with the robot's coverage ([`crate::align::Aligner::with_coverage`]), instead
+    /// of `min_inlier_ratio`: explained points over those the coverage can judge (explained, or
+    /// in a voxel that at least `overlap_min_crossings` of the robot's rays crossed), at least
+    /// `overlap_min_ratio`; and explained over all points at least `overlap_min_share`.
+    pub overlap_min_ratio: f64,
+    pub overlap_min_share: f64,
+    pub overlap_min_crossings: u16,
     /// Acceptance: norm of ICP's last update, at most (an ICP that had not settled is rejected).
     pub max_update_norm: f64,
     /// Acceptance: degeneracy index (see [`crate::align::AlignMetrics::degeneracy_index`]), at least.
@@ -175,6 +182,9 @@ impl Default for AlignConfig {
             inlier_distance_m: 0.3,
             max_rms_m: 0.1,
             min_inlier_ratio: 0.5,
+            overlap_min_ratio: 0.96,
+            overlap_min_share: 0.3,
+            overlap_min_crossings: 2,
             max_update_norm: 1e-3,
             min_degeneracy_index: 0.01,
             degeneracy_residual_m: 0.05,
@@ -315,6 +325,9 @@ impl AlignConfig {
                 || self.global_matches_per_point == 0)
         {
             return bad("global_* sizes must be positive, global_min_curvature not negative, global_matches_per_point at least 1");
+        }
+        if !(0.0..=1.0).contains(&self.overlap_min_ratio) || !(0.0..=1.0).contains(&self.overlap_min_share) {
+            return bad("overlap_min_ratio and overlap_min_share must be in [0, 1]");
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

@@ -14,6 +14,7 @@
 
 mod carve;
 mod config;
+pub mod coverage;
 mod free_space;
 mod geometry;
 pub mod global;
@@ -26,6 +27,7 @@ mod tiles;
 
 pub use carve::seen_through;
 pub use config::AlignConfig;
+pub use coverage::{Coverage, Overlap};
 pub use free_space::{FreeSpace, Ray};
 pub use geometry::{
     cloud_points, estimate_normals, pose_error, pose_from_rows, pose_rows, pose_xyz_yaw, Vec3, VoxelIndex,
@@ -42,5 +44,7 @@ pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_coverage;
 #[cfg(test)]
 mod tests_map;

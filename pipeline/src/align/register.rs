@@ -2,6 +2,7 @@
 //! seed, acceptance, and the yaw-grid reseeding around the circle.
 
 use super::config::AlignConfig;
+use super::coverage::{Coverage, Overlap};
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
 use super::geometry::{estimate_normals, pose_rows, Vec3, VoxelIndex};
 use super::global::{self, Described, GlobalParams};
@@ -117,6 +118,8 @@ pub struct Attempt {
     pub free_space: Option<FreeSpace>,
     /// The check of a result refused for its degeneracy index alone (`pinned_slides_m`).
     pub pinned: Option<PinnedCheck>,
+    /// The source against the robot's map and coverage (only when the aligner has coverage).
+    pub overlap: Option<Overlap>,
 }
 
 /// Whether what a degenerate result explains pins it down: the result is moved along each of
@@ -199,6 +202,8 @@ pub struct Aligner {
     surfels: SurfelGrid,
     /// The target's keypoints and descriptors for the global stage (empty when it is off).
     global_target: Described,
+    /// The space the target's sensor saw through; with it, acceptance judges the overlap.
+    coverage: Option<std::sync::Arc<Coverage>>,
     /// Time spent preparing the target.
     pub prepare_ms: f64,
 }
@@ -240,12 +245,22 @@ impl Aligner {
             icp_target: IcpTarget { index, normals },
             surfels,
             global_target,
+            coverage: None,
             prepare_ms: t0.ms(),
         })
     }
 
     pub fn config(&self) -> &AlignConfig {
         &self.config
+    }
+
+    /// Judges results on the part of the source the target's sensor covered (see
+    /// [`crate::align::coverage`]): the inlier ratio over covered points (`overlap_min_ratio`)
+    /// and enough explained points to judge by (`overlap_min_share`) replace the inlier ratio
+    /// over every point (`min_inlier_ratio`).
+    pub fn with_coverage(mut self, coverage: std::sync::Arc<Coverage>) -> Self {
+        self.coverage = Some(coverage);
+        self
     }
 
     /// Aligns `source` to the target from `initial` (a guess of the transform mapping source into
@@ -640,7 +655,7 @@ impl Aligner {
         };
         let free_space = self.check_free_space(src.rays, &mut judged);
         let verify_ms = t2.ms();
-        let Judged { r, rejected_because, pinned } = judged;
+        let Judged { r, rejected_because, pinned, overlap } = judged;
         Attempt {
             seed_yaw_offset_deg,
             seed_shift_m,
@@ -660,6 +675,7 @@ impl Aligner {
             ambiguous: false,
             free_space,
             pinned,
+            overlap,
         }
     }
 
@@ -695,8 +711,24 @@ impl Aligner {
 
     /// An ICP result with the acceptance tests' verdict on it ([`Aligner::judge`]).
     fn judged(&self, r: icp::IcpResult, source: &[Vec3]) -> Judged {
-        let (rejected_because, pinned) = self.judge(&r, source);
-        Judged { r, rejected_because, pinned }
+        let overlap = self.coverage.as_ref().map(|c| self.overlap(c, source, &r.pose));
+        let (rejected_because, pinned) = self.judge(&r, source, overlap.as_ref());
+        Judged { r, rejected_because, pinned, overlap }
+    }
+
+    /// How `source` placed by `pose` sits against the target and its coverage.
+    fn overlap(&self, coverage: &Coverage, source: &[Vec3], pose: &Isometry3<f64>) -> Overlap {
+        let c = &self.config;
+        let mut o = Overlap { points: source.len(), ..Overlap::default() };
+        for s in source {
+            let q = (pose * nalgebra::Point3::from(*s)).coords;
+            if self.icp_target.index.nearest(&q, c.inlier_distance_m).is_some() {
+                o.explained += 1;
+            } else if coverage.crossings(&q) >= c.overlap_min_crossings {
+                o.contradicted += 1;
+            }
+        }
+        o
     }
 
     /// Consistency check of a result that passed the tests: from starts around it, ICP must not
@@ -756,10 +788,15 @@ impl Aligner {
 
     /// The acceptance tests of an ICP result; one refused for its degeneracy index alone gets
     /// the check of [`PinnedCheck`], and passes when it is pinned.
-    fn judge(&self, r: &icp::IcpResult, source: &[Vec3]) -> (Vec<Rejection>, Option<PinnedCheck>) {
+    fn judge(
+        &self,
+        r: &icp::IcpResult,
+        source: &[Vec3],
+        overlap: Option<&Overlap>,
+    ) -> (Vec<Rejection>, Option<PinnedCheck>) {
         let c = &self.config;
         let m = metrics_of(r);
-        let mut why = self.rejections(&m);
+        let mut why = self.rejections(&m, overlap);
         let degenerate_only = why.len() == 1 && !at_most(c.min_degeneracy_index, m.degeneracy_index);
         if !degenerate_only || c.pinned_slides_m.is_empty() {
             return (why, None);
@@ -892,14 +929,29 @@ impl Aligner {
         (here, found)
     }
 
-    fn rejections(&self, m: &AlignMetrics) -> Vec<Rejection> {
+    fn rejections(&self, m: &AlignMetrics, overlap: Option<&Overlap>) -> Vec<Rejection> {
         let c = &self.config;
         let mut why = Vec::new();
         if !at_most(m.rms_residual_m, c.max_rms_m) {
             why.push(Rejection::Residual { rms_m: m.rms_residual_m, max_m: c.max_rms_m });
         }
-        if !at_most(c.min_inlier_ratio, m.inlier_ratio) {
-            why.push(Rejection::InlierRatio { ratio: m.inlier_ratio, min: c.min_inlier_ratio });
+        match overlap {
+            None if !at_most(c.min_inlier_ratio, m.inlier_ratio) => {
+                why.push(Rejection::InlierRatio { ratio: m.inlier_ratio, min: c.min_inlier_ratio });
+            }
+            None => {}
+            Some(o) => {
+                if !at_most(c.overlap_min_ratio, o.ratio()) {
+                    why.push(Rejection::Contradicted {
+                        ratio: o.ratio(),
+                        min: c.overlap_min_ratio,
+                        contradicted: o.contradicted,
+                    });
+                }
+                if !at_most(c.overlap_min_share, o.explained_share()) {
+                    why.push(Rejection::TooLittleOverlap { share: o.explained_share(), min: c.overlap_min_share });
+                }
+            }
         }
         if !at_most(m.update_norm, c.max_update_norm) {
             why.push(Rejection::NotSettled { update_norm: m.update_norm, max: c.max_update_norm });
@@ -924,6 +976,7 @@ struct Judged {
     /// Which tests failed (empty when it passed).
     rejected_because: Vec<Rejection>,
     pinned: Option<PinnedCheck>,
+    overlap: Option<Overlap>,
 }
 
 /// Why a result is refused when ICP from a start off it still lands on a better fit after

@@ -8,6 +8,12 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Rejection {
+    /// Of the points the robot's coverage can judge, too few explained: the rest lie in space
+    /// the robot saw through (`ratio` = explained over explained and contradicted).
+    Contradicted { ratio: f64, min: f64, contradicted: usize },
+    /// Too little of the view is explained to judge by (the robot has not mapped what the rig
+    /// sees yet): waiting for more.
+    TooLittleOverlap { share: f64, min: f64 },
     /// RMS point-to-plane residual above `max_rms_m`.
     Residual { rms_m: f64, max_m: f64 },
     /// Too few source points near the target (over the points judged).
@@ -42,6 +48,13 @@ impl fmt::Display for Rejection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Residual { rms_m, max_m } => write!(f, "rms residual {rms_m:.4} m > {max_m} m"),
+            Self::Contradicted { ratio, min, contradicted } => write!(
+                f,
+                "contradicted: {contradicted} points lie where the robot saw through (explained {ratio:.3} of the covered < {min})"
+            ),
+            Self::TooLittleOverlap { share, min } => {
+                write!(f, "waiting for overlap: the map explains {share:.3} of the view (< {min})")
+            }
             Self::InlierRatio { ratio, min } => write!(f, "inlier ratio {ratio:.3} < {min}"),
             Self::NotSettled { update_norm, max } => write!(f, "update norm {update_norm:.2e} > {max:.0e}"),
             Self::Degenerate { index, min } => write!(f, "degeneracy index {index:.2e} < {min:.0e}"),

@@ -71,16 +71,30 @@ pub enum Health {
     Degenerate,
     /// The scan was refused; the IMU carries the state.
     ImuOnly,
+    /// The scan was refused; the base's wheels and the IMU carry the state.
+    WheelOnly,
     /// Scans have been refused for longer than `max_ride_s`.
     Lost,
 }
 
 impl Health {
+    /// Every health, in order of what the scan did for the state.
+    pub const ALL: [Health; 5] = [Self::Tracking, Self::Degenerate, Self::WheelOnly, Self::ImuOnly, Self::Lost];
+
+    /// The scan refused while the wheels held the state: wheel-only rather than IMU-only.
+    pub fn with_wheels(self, wheels_applied: bool) -> Self {
+        match self {
+            Self::ImuOnly if wheels_applied => Self::WheelOnly,
+            other => other,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Tracking => "tracking",
             Self::Degenerate => "degenerate",
             Self::ImuOnly => "imu_only",
+            Self::WheelOnly => "wheel_only",
             Self::Lost => "lost",
         }
     }

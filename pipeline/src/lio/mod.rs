@@ -30,5 +30,5 @@ pub use plane::Plane;
 pub use propagate::ImuNoise;
 pub use state::State;
 pub use types::{Clock, ImuSample, LioScan, TimedPoint};
-pub use update::{UpdateConfig, UpdateReport};
+pub use update::{weak_axes_names, UpdateConfig, UpdateReport};
 pub use wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};

@@ -373,7 +373,7 @@ impl Lio {
             end_ns: scan.end_ns,
             lidar_pose: self.state.lidar_pose(),
             update: report,
-            health: verdict.map_or(Health::Tracking, |v| v.health),
+            health: verdict.map_or(Health::Tracking, |v| v.health).with_wheels(wheel == WheelUse::Applied),
             refused,
             pos_sigma_m: pos_var.max(0.0).sqrt(),
             yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),

@@ -66,6 +66,16 @@ pub struct UpdateReport {
     pub rms_m: f64,
     /// Directions of the pose that took no update in the last iteration (0 to 6).
     pub weak_directions: usize,
+    /// Which axes those directions mostly lie along: bit k for axis k of the update's error
+    /// state (rx, ry, rz: turns; x, y, z: moves), the largest component of each weak direction
+    /// (a corridor along x sets bit 3). [`weak_axes_names`] spells it out.
+    pub weak_axes: u8,
+}
+
+/// The axes of [`UpdateReport::weak_axes`] by name, joined by `+` ("" when none).
+pub fn weak_axes_names(mask: u8) -> String {
+    const NAMES: [&str; 6] = ["rx", "ry", "rz", "x", "y", "z"];
+    NAMES.iter().enumerate().filter(|(k, _)| mask & (1 << k) != 0).map(|(_, n)| *n).collect::<Vec<_>>().join("+")
 }
 
 /// Runs the update. Leaves state and covariance unchanged (and reports 0 matched) when too few
@@ -207,6 +217,13 @@ impl NormalEquations {
         if report.weak_directions > 0 && tracing::enabled!(tracing::Level::TRACE) {
             trace_weak_directions(&eigen, cfg, it);
         }
+        report.weak_axes = 0;
+        for (l, v) in eigen.eigenvalues.iter().zip(eigen.eigenvectors.column_iter()) {
+            let axis = v.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map(|(k, _)| k);
+            if let (true, Some(k)) = (*l < cfg.min_direction_info, axis) {
+                report.weak_axes |= 1 << k;
+            }
+        }
         if report.weak_directions > 0 {
             self.keep_strong_directions(&eigen, &s, cfg);
         }
@@ -289,6 +306,7 @@ mod tests {
         let report = update(&mut state, &mut cov, &points, &map, &UpdateConfig::default());
         assert!(report.converged && report.matched > 200, "{report:?}");
         assert!(report.weak_directions >= 3, "{report:?}");
+        assert_eq!(weak_axes_names(report.weak_axes), "rz+x+y", "{report:?}");
         assert!(report.degeneracy_index < 1e-6, "{report:?}");
         assert!((state.pos.z - 1.0).abs() < 0.01, "height corrected: {}", state.pos.z);
         assert!((state.pos.x - 0.2).abs() < 1e-6 && state.pos.y.abs() < 1e-6, "x, y kept: {:?}", state.pos);

@@ -12,7 +12,7 @@ use nalgebra::Isometry3;
 /// What one input made happen, in order.
 pub enum MissionEvent {
     /// A robot LIO pose; `lio_ms` is its compute time.
-    RobotPose { end_ns: u64, pose: Isometry3<f64>, lio_ms: f64 },
+    RobotPose { end_ns: u64, pose: Isometry3<f64>, lio_ms: f64, health: crate::lio::Health },
     /// A robot detection window (already on its way to the rig).
     Detection(Box<RobotDetection>),
     /// The rig's first LIO pose.
@@ -29,11 +29,19 @@ pub struct OfflineMission {
     robot_steps: Vec<RobotStep>,
     rig_outs: Vec<ScanOutput>,
     robot_last_ns: Option<u64>,
+    use_coverage: bool,
 }
 
 impl OfflineMission {
     pub fn new(robot: RobotCore, rig: RigSide) -> Self {
-        Self { robot, rig, robot_steps: Vec::new(), rig_outs: Vec::new(), robot_last_ns: None }
+        Self { robot, rig, robot_steps: Vec::new(), rig_outs: Vec::new(), robot_last_ns: None, use_coverage: true }
+    }
+
+    /// Whether the rig's acceptance judges the overlap with the robot's coverage (on by
+    /// default) or the inlier ratio over its whole window (to measure what coverage brings).
+    pub fn with_coverage(mut self, on: bool) -> Self {
+        self.use_coverage = on;
+        self
     }
 
     /// Feeds one input; what it gave goes to `events`. Alignment waits for [`Self::align`], so
@@ -55,6 +63,7 @@ impl OfflineMission {
                 end_ns: o.end_ns,
                 pose: o.lidar_pose,
                 lio_ms: o.elapsed_us as f64 * 1e-3,
+                health: o.health,
             });
             if let Some(det) = step.detection {
                 self.rig.push_detections(det.stamp_ns, people_to_draw(&people_to_send(&det)));
@@ -74,6 +83,9 @@ impl OfflineMission {
     pub fn align(&mut self) -> Option<MissionEvent> {
         if self.rig.wants_map() && self.robot.map_len() != self.rig.core().map_len() {
             self.rig.set_map_points(self.robot.map_points());
+            if self.use_coverage {
+                self.rig.set_coverage(self.robot.map_coverage());
+            }
         }
         let job = self.rig.next_job()?;
         let end_ns = job.end_ns;

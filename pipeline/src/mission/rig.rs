@@ -8,8 +8,8 @@
 
 use super::place::{ScanPlacer, ScanPoses};
 use crate::align::{
-    filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, ExclusionBox, PlacedPoint, Ray,
-    Reasons, WindowConfig,
+    filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
+    PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
 };
 use crate::ar::OrientedBox;
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
@@ -47,6 +47,10 @@ pub struct RigCoreConfig {
     /// A first alignment farther than this from the expected start is refused (only with a
     /// start hint).
     pub start_gate_m: f64,
+    /// This many re-registrations in a row refused for contradicting the robot's map (points
+    /// where the robot saw through, rays through its surfaces) mean the alignment was wrong:
+    /// the rig is placed nowhere again and searches from scratch (0: never).
+    pub lose_after_contradictions: u32,
 }
 
 impl Default for RigCoreConfig {
@@ -74,6 +78,7 @@ impl Default for RigCoreConfig {
             people_margin_m: 0.15,
             min_map_points: 1000,
             start_gate_m: 2.0,
+            lose_after_contradictions: 3,
         }
     }
 }
@@ -102,6 +107,7 @@ pub struct AlignJob {
     scans: Vec<Arc<LioScan>>,
     odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
+    coverage: Option<Arc<Coverage>>,
     config: AlignConfig,
     lidar_pose: Isometry3<f64>,
     guess_world_t_lidar: Isometry3<f64>,
@@ -156,7 +162,10 @@ impl AlignJob {
             points_out = kept.points_out,
             "rig window"
         );
-        let aligner = Aligner::new(&self.target, self.config)?;
+        let mut aligner = Aligner::new(&self.target, self.config)?;
+        if let Some(c) = self.coverage {
+            aligner = aligner.with_coverage(c);
+        }
         let guess = self.guess_world_t_lidar * self.lidar_pose.inverse() * frame;
         let report = aligner.align_with_rays(&source, &rays, &guess);
         // The registered frame back to the rig's LiDAR pose in the world.
@@ -209,6 +218,9 @@ pub enum AlignVerdict {
     Failed {
         error: String,
     },
+    /// A re-registration refused for contradicting the map, the last of
+    /// `lose_after_contradictions` in a row: the alignment is dropped and the search starts over.
+    Lost(AlignFailure),
     /// Passed its tests, but puts the rig's start (its first odometry pose, carried by the
     /// odometry to the registered pose) `off_m` from the expected start.
     FarFromStart {
@@ -222,6 +234,7 @@ impl std::fmt::Display for AlignVerdict {
             Self::Accepted { first: true } => f.write_str("accepted (first)"),
             Self::Accepted { first: false } => f.write_str("accepted"),
             Self::Refused(why) => write!(f, "refused: {why}"),
+            Self::Lost(why) => write!(f, "lost: the map contradicts the alignment again ({why}); searching anew"),
             Self::Failed { error } => write!(f, "failed: {error}"),
             Self::FarFromStart { off_m } => write!(f, "refused: {off_m:.2} m from the expected start"),
         }
@@ -246,8 +259,12 @@ pub struct RigCore {
     start_hint: Option<Isometry3<f64>>,
     map: Arc<Vec<Vector3<f64>>>,
     map_raw_len: usize,
+    coverage: Option<Arc<Coverage>>,
     pub attempts: usize,
     pub accepted: usize,
+    /// Re-registrations refused in a row for contradicting the map, and alignments dropped.
+    contradicted_in_row: u32,
+    pub lost: usize,
 }
 
 impl RigCore {
@@ -269,8 +286,11 @@ impl RigCore {
             start_hint: None,
             map: Arc::new(Vec::new()),
             map_raw_len: 0,
+            coverage: None,
             attempts: 0,
             accepted: 0,
+            contradicted_in_row: 0,
+            lost: 0,
             cfg,
         })
     }
@@ -318,6 +338,12 @@ impl RigCore {
 
     pub fn map_len(&self) -> usize {
         self.map_raw_len
+    }
+
+    /// The space the robot's rays crossed, beside its map: acceptance then judges the overlap
+    /// (see [`Aligner::with_coverage`]). Without it, the inlier ratio over the whole window.
+    pub fn set_coverage(&mut self, coverage: Arc<Coverage>) {
+        self.coverage = Some(coverage);
     }
 
     pub fn push_imu(&mut self, sample: ImuSample, out: &mut Vec<ScanOutput>) {
@@ -414,6 +440,7 @@ impl RigCore {
             scans,
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
+            coverage: self.coverage.clone(),
             config: self.job_config(aligned),
             lidar_pose,
             guess_world_t_lidar: guess,
@@ -429,7 +456,11 @@ impl RigCore {
             Err(e) => return AlignVerdict::Failed { error: e.to_string() },
         };
         if !o.report.accepted {
-            return AlignVerdict::Refused(o.report.failure.unwrap_or(AlignFailure::NoAttempt));
+            let failure = o.report.failure.unwrap_or(AlignFailure::NoAttempt);
+            return self.refused(o.tracking, failure);
+        }
+        if o.tracking {
+            self.contradicted_in_row = 0;
         }
         let first = !self.aligned();
         if let (true, Some(hint)) = (first, &self.start_hint) {
@@ -443,6 +474,27 @@ impl RigCore {
         }
         self.accepted += 1;
         AlignVerdict::Accepted { first }
+    }
+
+    /// A refused registration; a re-registration refused for contradicting the map counts
+    /// towards dropping the alignment.
+    fn refused(&mut self, tracking: bool, failure: AlignFailure) -> AlignVerdict {
+        let contradicts = failure
+            .because()
+            .iter()
+            .any(|r| matches!(r, Rejection::Contradicted { .. } | Rejection::SeesThroughMap { .. }));
+        if !tracking || !self.aligned() {
+            return AlignVerdict::Refused(failure);
+        }
+        self.contradicted_in_row = if contradicts { self.contradicted_in_row + 1 } else { 0 };
+        let limit = self.cfg.lose_after_contradictions;
+        if limit == 0 || self.contradicted_in_row < limit {
+            return AlignVerdict::Refused(failure);
+        }
+        self.world.lose();
+        self.contradicted_in_row = 0;
+        self.lost += 1;
+        AlignVerdict::Lost(failure)
     }
 
     /// `people_world` as exclusion boxes in the rig's odometry frame (none before the rig is
@@ -547,6 +599,36 @@ mod tests {
         assert!((b.yaw_rad - (0.3 - std::f64::consts::FRAC_PI_2)).abs() < 1e-9);
         assert!((b.size_m - Vector3::new(0.8, 0.7, 2.1)).norm() < 1e-9, "0.15 m more on every side");
         assert!(b.contains(&Vector3::new(3.0, -2.0, 0.0)));
+    }
+
+    #[test]
+    fn contradicted_re_registrations_in_a_row_drop_the_alignment() {
+        use super::AlignVerdict;
+        use crate::align::{AlignFailure, Rejection};
+        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        let odom_t_lidar = pose_xyz_yaw(1.0, 0.0, 1.5, 0.0);
+        rig.world_mut().push_odometry(1_000, odom_t_lidar).unwrap();
+        rig.world_mut().push_registration(1_000, pose_xyz_yaw(5.0, 2.0, 1.5, 40.0)).unwrap();
+        let failure = |r: Rejection| AlignFailure::NoneAccepted {
+            attempts: 1,
+            seeds: 1,
+            best_seed_yaw_deg: 0.0,
+            because: vec![r],
+        };
+        let contradicted = || failure(Rejection::Contradicted { ratio: 0.8, min: 0.96, contradicted: 300 });
+        let degenerate = failure(Rejection::Degenerate { index: 0.001, min: 0.02 });
+        // Two contradictions, then a refusal that says nothing against the alignment: the count
+        // starts over.
+        assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Refused(_)));
+        assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Refused(_)));
+        assert!(matches!(rig.refused(true, degenerate), AlignVerdict::Refused(_)));
+        assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Refused(_)));
+        assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Refused(_)));
+        assert!(rig.aligned());
+        assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Lost(_)));
+        assert!(!rig.aligned() && rig.lost == 1, "placed nowhere again");
+        // Refusals of a search (not tracking) never count.
+        assert!(matches!(rig.refused(false, contradicted()), AlignVerdict::Refused(_)));
     }
 
     #[test]

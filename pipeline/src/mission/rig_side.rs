@@ -103,6 +103,11 @@ impl RigSide {
         self.core.set_map(points);
     }
 
+    /// The space the robot's rays crossed (see [`RigCore::set_coverage`]).
+    pub fn set_coverage(&mut self, coverage: std::sync::Arc<crate::align::Coverage>) {
+        self.core.set_coverage(coverage);
+    }
+
     /// Map tiles held (0 when the map came whole).
     pub fn tile_count(&self) -> usize {
         match &self.map {

@@ -4,7 +4,8 @@
 
 use super::person_motion::{PersonMotion, WALKING_MPS};
 use super::place::ScanPlacer;
-use super::robot_map::{RobotMap, RobotMapConfig};
+use super::robot_map::{MapScan, RobotMap, RobotMapConfig};
+use crate::align::Coverage;
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{
     DetectConfig, DetectWindow, Detection, Detector, FloorModel, GeometricDetector, PersonPose, WindowPoint,
@@ -53,6 +54,12 @@ pub struct RobotCoreConfig {
 /// wheeled base on a floor turns smoothly, so its attitude is left to its gyro between scans far
 /// more than a walker's helmet can be (the LIO's generic 0.1 lets a scan that sees little but new
 /// geometry, in a turn, tilt it by up to a degree; 0.005 is still 20 times the BMI088's density).
+/// The robot's coverage (space its rays crossed) in voxels of this size, from every this many
+/// points' rays: a quarter metre tells a room's free middle from its walls, and one ray in 16
+/// covers a room within a few scans.
+pub const COVERAGE_VOXEL_M: f64 = 0.25;
+pub const COVERAGE_RAY_STRIDE: usize = 16;
+
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
 /// The base's ground point in the Avia IMU's frame: the Avia 0.45 m above the floor, level, over
 /// the base's centre (the Avia's IMU sits at (0.04165, 0.02326, -0.0284) m in its LiDAR's
@@ -78,7 +85,13 @@ impl RobotCoreConfig {
 
     /// The map's part of the config.
     pub fn map_config(&self) -> RobotMapConfig {
-        RobotMapConfig { voxel_m: self.map_voxel_m, tile_edge_m: self.tile_edge_m, tile_step_m: self.tile_step_m }
+        RobotMapConfig {
+            voxel_m: self.map_voxel_m,
+            tile_edge_m: self.tile_edge_m,
+            tile_step_m: self.tile_step_m,
+            coverage_voxel_m: COVERAGE_VOXEL_M,
+            coverage_ray_stride: COVERAGE_RAY_STRIDE,
+        }
     }
 }
 
@@ -132,7 +145,7 @@ pub struct RobotCore {
     /// Placed scans not yet in the map (shared with the window): they go in when the map is
     /// next asked for, so that growing the map never delays a detection (or a node takes them
     /// to grow its own map elsewhere: [`Self::take_unmapped`]).
-    unmapped: Vec<Arc<Vec<WindowPoint>>>,
+    unmapped: Vec<MapScan>,
     map: RobotMap,
     motion: PersonMotion,
     outs: Vec<ScanOutput>,
@@ -180,7 +193,7 @@ impl RobotCore {
         let outs = std::mem::take(&mut self.outs);
         for o in outs {
             let placed = Arc::new(self.placer.place(&o));
-            self.unmapped.push(Arc::clone(&placed));
+            self.unmapped.push(MapScan { origin_m: o.lidar_pose.translation.vector, points: Arc::clone(&placed) });
             self.window.push_back(placed);
             if self.window.len() > self.cfg.detect_scans {
                 self.window.pop_front();
@@ -191,15 +204,15 @@ impl RobotCore {
     }
 
     fn flush_map(&mut self) {
-        for placed in std::mem::take(&mut self.unmapped) {
-            self.map.add(&placed);
+        for scan in std::mem::take(&mut self.unmapped) {
+            self.map.add_scan(&scan);
         }
     }
 
     /// The placed scans not yet in this core's map, for a map grown elsewhere (a
     /// [`RobotMap`] made from [`RobotCoreConfig::map_config`]); this core's own map then never
     /// sees them.
-    pub fn take_unmapped(&mut self) -> Vec<Arc<Vec<WindowPoint>>> {
+    pub fn take_unmapped(&mut self) -> Vec<MapScan> {
         std::mem::take(&mut self.unmapped)
     }
 
@@ -242,6 +255,12 @@ impl RobotCore {
     pub fn map_points(&mut self) -> Vec<Vector3<f64>> {
         self.flush_map();
         self.map.points()
+    }
+
+    /// The space the robot's rays crossed so far (see [`crate::align::coverage`]).
+    pub fn map_coverage(&mut self) -> Arc<Coverage> {
+        self.flush_map();
+        self.map.coverage()
     }
 
     pub fn map_len(&mut self) -> usize {

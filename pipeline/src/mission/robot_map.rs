@@ -2,20 +2,32 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::encode_tiles;
+use crate::align::{encode_tiles, Coverage};
 use crate::detect::WindowPoint;
 use crate::voxel_hash::key_of;
 use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
 use crate::PipelineError;
 use nalgebra::Vector3;
+use std::sync::Arc;
 
 type VoxelKey = crate::voxel_hash::Key;
+
+/// One placed scan for the map: its points in the world and where the sensor was.
+#[derive(Clone, Debug)]
+pub struct MapScan {
+    pub origin_m: Vector3<f64>,
+    pub points: Arc<Vec<WindowPoint>>,
+}
 
 /// Voxel and tile sizes of a [`RobotMap`].
 #[derive(Clone, Copy, Debug)]
 pub struct RobotMapConfig {
     /// One point per voxel of this size.
     pub voxel_m: f64,
+    /// The coverage (space the rays crossed) in voxels of this size, from every
+    /// `coverage_ray_stride`-th point's ray (0: no coverage).
+    pub coverage_voxel_m: f64,
+    pub coverage_ray_stride: usize,
     /// Edge and quantization of the tiles.
     pub tile_edge_m: f64,
     pub tile_step_m: f64,
@@ -28,6 +40,7 @@ pub struct RobotMap {
     tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
     dirty_tiles: VoxelHashSet<VoxelKey>,
     tile_version: u32,
+    coverage: Arc<Coverage>,
 }
 
 impl RobotMap {
@@ -44,7 +57,26 @@ impl RobotMap {
             tiles: VoxelHashMap::default(),
             dirty_tiles: VoxelHashSet::default(),
             tile_version: 0,
+            coverage: Arc::new(Coverage::new(cfg.coverage_voxel_m)),
         })
+    }
+
+    /// Adds a placed scan: the first point of each new voxel is kept, and a sample of its rays
+    /// grows the coverage.
+    pub fn add_scan(&mut self, scan: &MapScan) {
+        self.add(&scan.points);
+        if self.cfg.coverage_ray_stride == 0 {
+            return;
+        }
+        let coverage = Arc::make_mut(&mut self.coverage);
+        for p in scan.points.iter().step_by(self.cfg.coverage_ray_stride) {
+            coverage.add_ray(&scan.origin_m, &p.xyz());
+        }
+    }
+
+    /// The space the robot's rays crossed (shared: cloning it is cheap until the map grows).
+    pub fn coverage(&self) -> Arc<Coverage> {
+        Arc::clone(&self.coverage)
     }
 
     /// Adds a placed scan's points (world frame): the first point of each new voxel is kept.
@@ -108,7 +140,13 @@ mod tests {
 
     #[test]
     fn keeps_a_point_per_voxel_and_sends_each_change_once() {
-        let cfg = RobotMapConfig { voxel_m: 0.1, tile_edge_m: 4.0, tile_step_m: 0.01 };
+        let cfg = RobotMapConfig {
+            voxel_m: 0.1,
+            tile_edge_m: 4.0,
+            tile_step_m: 0.01,
+            coverage_voxel_m: 0.25,
+            coverage_ray_stride: 0,
+        };
         let mut map = RobotMap::new(cfg).unwrap();
         // 0.01 m apart over 2 m: 20 voxels of 0.1 m, one tile of 4 m.
         map.add(&points((0..200).map(|i| f64::from(i) * 0.01 + 0.005)));
@@ -133,6 +171,13 @@ mod tests {
 
     #[test]
     fn refuses_tiles_smaller_than_voxels() {
-        assert!(RobotMap::new(RobotMapConfig { voxel_m: 0.5, tile_edge_m: 0.2, tile_step_m: 0.01 }).is_err());
+        assert!(RobotMap::new(RobotMapConfig {
+            voxel_m: 0.5,
+            tile_edge_m: 0.2,
+            tile_step_m: 0.01,
+            coverage_voxel_m: 0.25,
+            coverage_ray_stride: 0,
+        })
+        .is_err());
     }
 }

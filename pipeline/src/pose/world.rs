@@ -210,6 +210,14 @@ impl WorldPose {
         }
     }
 
+    /// Forgets the alignment (the rig is placed nowhere again), keeping the odometry: for a
+    /// registration that later evidence shows was wrong.
+    pub fn lose(&mut self) {
+        self.applied = None;
+        self.target = None;
+        self.last_taken_ns = None;
+    }
+
     /// The rig's odometry `oT_fpv` at `t_ns` (from its LIO; strictly increasing times).
     pub fn push_odometry(&mut self, t_ns: u64, o_t_fpv: Isometry3<f64>) -> Result<(), PipelineError> {
         self.odom.push(t_ns, o_t_fpv)

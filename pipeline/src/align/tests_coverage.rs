@@ -1,0 +1,93 @@
+//! Acceptance with the robot's coverage: a fit of a view that reaches past the map passes, a
+//! fit that puts points where the robot saw through is refused.
+#![allow(clippy::unwrap_used)]
+
+use super::*;
+use nalgebra::{Isometry3, Point3};
+use std::sync::Arc;
+
+/// Walls of a 20 x 6 m hall split by a wall at x = 5 with a 1.2 m door; 2.5 m high.
+fn walls(x_max: f64) -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    let mut segment = |a: (f64, f64), b: (f64, f64)| {
+        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+        let n = (len / 0.05) as usize;
+        for i in 0..=n {
+            let f = i as f64 / n.max(1) as f64;
+            let (x, y) = (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1));
+            if x <= x_max + 1e-9 {
+                for k in 0..=50 {
+                    pts.push(Vec3::new(x, y, f64::from(k) * 0.05));
+                }
+            }
+        }
+    };
+    segment((0.0, 0.0), (20.0, 0.0));
+    segment((20.0, 0.0), (20.0, 6.0));
+    segment((20.0, 6.0), (0.0, 6.0));
+    segment((0.0, 6.0), (0.0, 0.0));
+    segment((5.0, 0.0), (5.0, 2.4));
+    segment((5.0, 3.6), (5.0, 6.0));
+    // A cupboard in the left room, so the fit is not a bare box.
+    segment((1.0, 4.0), (2.0, 4.0));
+    segment((2.0, 4.0), (2.0, 5.0));
+    // The floor.
+    for i in 0..=(x_max.min(20.0) / 0.1) as i32 {
+        for j in 0..=60 {
+            pts.push(Vec3::new(f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
+        }
+    }
+    pts
+}
+
+/// The robot mapped the left room from (2.5, 3, 1.2): its walls, and the space its rays crossed.
+fn robot_map() -> (Vec<Vec3>, Arc<Coverage>) {
+    let map = walls(5.0);
+    let origin = Vec3::new(2.5, 3.0, 1.2);
+    let mut coverage = Coverage::new(0.25);
+    for p in map.iter().step_by(3) {
+        coverage.add_ray(&origin, p);
+    }
+    (map, Arc::new(coverage))
+}
+
+fn config() -> AlignConfig {
+    AlignConfig { reseed_yaw_step_deg: 0.0, ndt_resolutions_m: vec![1.0], seed_levels: 1, ..AlignConfig::default() }
+}
+
+#[test]
+fn a_view_reaching_past_the_map_passes_on_what_the_robot_covered() {
+    let (map, coverage) = robot_map();
+    // The rig stands at the door and sees both rooms; the robot mapped only the left one.
+    let truth = pose_xyz_yaw(5.5, 3.0, 1.4, 30.0);
+    let source: Vec<Vec3> =
+        walls(20.0).iter().map(|p| truth.inverse_transform_point(&Point3::from(*p)).coords).collect();
+    let start = truth * pose_xyz_yaw(0.15, -0.1, 0.0, 2.0);
+    let plain = Aligner::new(&map, config()).unwrap().align(&source, &start);
+    let best = plain.best().unwrap();
+    assert!(!plain.accepted && best.rejected_because.iter().any(|r| matches!(r, Rejection::InlierRatio { .. })));
+    let judged = Aligner::new(&map, config()).unwrap().with_coverage(Arc::clone(&coverage)).align(&source, &start);
+    let a = judged.best().unwrap();
+    assert!(judged.accepted, "{:?} {:?}", a.rejected_because, a.overlap);
+    let o = a.overlap.unwrap();
+    assert!(o.ratio() > 0.99 && o.explained_share() < 0.6, "{o:?}");
+    let (m, deg) = pose_error(&judged.pose, &truth);
+    assert!(m < 0.05 && deg < 0.5, "{m} m {deg} deg");
+}
+
+#[test]
+fn points_where_the_robot_saw_through_refuse_a_fit() {
+    let (map, coverage) = robot_map();
+    // The left room as mapped, plus a wall across its middle that the robot's rays crossed:
+    // whatever the rig saw, it was not this room.
+    let mut seen = walls(5.0);
+    for i in 0..=60 {
+        for k in 0..=50 {
+            seen.push(Vec3::new(1.0 + f64::from(i) * 0.05, 2.0, f64::from(k) * 0.05));
+        }
+    }
+    let judged = Aligner::new(&map, config()).unwrap().with_coverage(coverage).align(&seen, &Isometry3::identity());
+    let a = judged.best().unwrap();
+    assert!(!judged.accepted);
+    assert!(a.rejected_because.iter().any(|r| matches!(r, Rejection::Contradicted { .. })), "{:?}", a.rejected_because);
+}
