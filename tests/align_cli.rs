@@ -51,8 +51,9 @@ fn the_scan_origin_turns_on_the_free_space_check() {
     let (ok, report, stderr) = align(&source, &target, "0,0,-30");
     assert!(!ok);
     assert!(stderr.contains("alignment rejected"), "{stderr}");
-    let failure = report["failure"].as_str().unwrap();
-    assert!(failure.contains("sees through the map"), "{failure}");
+    // The failure is typed: the best attempt's reasons, each with its kind.
+    let because = report["failure"]["because"].as_array().unwrap();
+    assert!(because.iter().any(|r| r["kind"] == "sees_through_map"), "{}", report["failure"]);
 }
 
 #[test]

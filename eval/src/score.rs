@@ -70,8 +70,7 @@ pub struct Scorer {
     /// The robot's newest pose: its detections up to here have all come in.
     robot_ns: Option<u64>,
     /// Each robot pose's time and error, and the LIO's health when the run reports it.
-    robot_series: Vec<(u64, f64)>,
-    robot_health: Vec<(u64, Health)>,
+    robot_series: Vec<(u64, f64, Option<Health>)>,
     detected: DetectedLog,
     pending: VecDeque<PendingFrame>,
     overlay: OverlayTally,
@@ -107,7 +106,6 @@ impl Scorer {
             projected: Vec::new(),
             robot_ns: None,
             robot_series: Vec::new(),
-            robot_health: Vec::new(),
             detected: DetectedLog::default(),
             pending: VecDeque::new(),
             overlay: OverlayTally::default(),
@@ -121,29 +119,28 @@ impl Scorer {
         let l_t_w = *self.lio_t_world.get_or_insert_with(|| lidar_pose * truth.inverse());
         let (m, deg) = pose_error(&(l_t_w * truth), lidar_pose);
         self.robot_err_m.push(m);
-        self.robot_series.push((end_ns, m));
+        self.robot_series.push((end_ns, m, None));
         self.robot_err_deg.push(deg);
         self.robot_ns = Some(self.robot_ns.map_or(end_ns, |t| t.max(end_ns)));
     }
 
     /// The robot LIO's health at a scored pose (offline runs report it; see [`crate::drift`]).
     pub fn robot_health(&mut self, end_ns: u64, health: Health) {
-        self.robot_health.push((end_ns, health));
+        if let Some(last) = self.robot_series.last_mut().filter(|p| p.0 == end_ns) {
+            last.2 = Some(health);
+        }
     }
 
     /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
     fn drift(&self) -> Option<DriftReport> {
-        if self.robot_health.is_empty() {
-            return None;
-        }
         let poses: Vec<ScoredPose> = self
             .robot_series
             .iter()
-            .filter_map(|&(t_ns, error_m)| {
-                let (_, health) = self.robot_health.iter().find(|(t, _)| *t == t_ns)?;
-                Some(ScoredPose { t_ns, error_m, health: *health })
-            })
+            .filter_map(|&(t_ns, error_m, health)| Some(ScoredPose { t_ns, error_m, health: health? }))
             .collect();
+        if poses.is_empty() {
+            return None;
+        }
         Some(drift_stretches(&poses, DRIFT_WINDOW_NS, DRIFT_GROW_M))
     }
 

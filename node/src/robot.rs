@@ -9,7 +9,7 @@ use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::LivoxDriver;
 use starc_pipeline::mission::{
-    people_to_send, MapScan, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep,
+    people_to_send, MapScan, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotMapConfig, RobotStep,
 };
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
@@ -29,7 +29,26 @@ pub struct RobotSummary {
     pub imu_samples: u64,
     pub detections_sent: u64,
     pub tiles_sent: u64,
+    /// Messages the link refused or failed to send (a non-finite pose, a session error): each
+    /// counted and logged, none the end of the node.
+    pub publish_errors: u64,
     pub peak_rss_mib: Option<f64>,
+}
+
+/// Publishes `msg`; a failure is counted in `errors` and logged (the first, then at each power
+/// of two), never returned: a robot that stops detecting because one pose could not be sent
+/// helps nobody, and the rig sees the gap in what arrives.
+async fn publish(link: &LinkNode, msg: &LinkMessage, errors: &mut u64) -> bool {
+    match link.publish(msg).await {
+        Ok(()) => true,
+        Err(e) => {
+            *errors += 1;
+            if errors.is_power_of_two() {
+                tracing::warn!(errors = *errors, "link: a message was not sent: {e}");
+            }
+            false
+        }
+    }
 }
 
 /// Runs until `stop`; `watch` (if any) hears every pose and detection.
@@ -43,7 +62,8 @@ pub async fn run(
         None => RobotCoreConfig::robot_lio(),
     };
     let core_cfg = RobotCoreConfig { lio, ..RobotCoreConfig::default() };
-    let map = RobotMap::new(core_cfg.map_config())?;
+    // The link carries no coverage yet, so the node does not walk rays for it.
+    let map = RobotMap::new(RobotMapConfig { coverage_ray_stride: 0, ..core_cfg.map_config() })?;
     let mut core = RobotCore::new(core_cfg)?;
     let period = Duration::from_millis(cfg.map_period_ms.max(10));
     let (map_tx, mut tiles_rx, map_thread) = spawn_map(map, period)?;
@@ -69,8 +89,9 @@ pub async fn run(
                     continue;
                 };
                 for bytes in tiles {
-                    link.publish(&LinkMessage::MapTile { bytes }).await?;
-                    summary.tiles_sent += 1;
+                    if publish(&link, &LinkMessage::MapTile { bytes }, &mut summary.publish_errors).await {
+                        summary.tiles_sent += 1;
+                    }
                 }
             }
             ev = events.recv() => {
@@ -102,8 +123,9 @@ pub async fn run(
                         let sent_host_ns = host_now_ns();
                         let stamp = Stamp::new(det.stamp_ns, clock);
                         let msg = LinkMessage::Detections { seq, stamp, scan_last_packet_host_ns: last_packet_host_ns, sent_host_ns, people };
-                        link.publish(&msg).await?;
-                        summary.detections_sent += 1;
+                        if publish(&link, &msg, &mut summary.publish_errors).await {
+                            summary.detections_sent += 1;
+                        }
                         if let Some(r) = recorder.as_mut() {
                             r.detections(det.stamp_ns, &det);
                         }
@@ -113,7 +135,8 @@ pub async fn run(
                     }
                     let o = &step.output;
                     let stamp = Stamp::new(o.end_ns, scan_of(&scan_hosts, o.end_ns).0);
-                    link.publish(&LinkMessage::RobotPose { stamp, world_t_lidar: o.lidar_pose }).await?;
+                    let pose = LinkMessage::RobotPose { stamp, world_t_lidar: o.lidar_pose };
+                    publish(&link, &pose, &mut summary.publish_errors).await;
                     if let Some(r) = recorder.as_mut() {
                         r.pose(o.end_ns, &o.lidar_pose);
                     }
@@ -132,8 +155,9 @@ pub async fn run(
     drop(map_tx);
     while let Some(tiles) = tiles_rx.recv().await {
         for bytes in tiles {
-            link.publish(&LinkMessage::MapTile { bytes }).await?;
-            summary.tiles_sent += 1;
+            if publish(&link, &LinkMessage::MapTile { bytes }, &mut summary.publish_errors).await {
+                summary.tiles_sent += 1;
+            }
         }
     }
     map_thread.join().map_err(|_| NodeError::Thread("the map thread panicked"))??;
@@ -187,4 +211,30 @@ fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, Encode
         })
         .map_err(|source| NodeError::Io { what: "starting the map thread", source })?;
     Ok((scans_tx, tiles_rx, thread))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::publish;
+    use nalgebra::{Isometry3, Translation3};
+    use starc_link::{LinkConfig, LinkMessage, LinkNode, Role};
+    use starc_time::{Clock, Stamp};
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_message_the_link_refuses_is_counted_and_the_next_one_goes_out() {
+        // A free loopback port for the robot's listener (no peer needed to publish).
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let cfg = LinkConfig { listen: vec![format!("tcp/127.0.0.1:{port}")], ..LinkConfig::default() };
+        let link = LinkNode::open(&cfg, Role::Robot).await.unwrap();
+        let stamp = Stamp::new(1_000, Clock::Ptp);
+        let nan = Isometry3::from_parts(Translation3::new(f64::NAN, 0.0, 0.0), Default::default());
+        let mut errors = 0;
+        assert!(!publish(&link, &LinkMessage::RobotPose { stamp, world_t_lidar: nan }, &mut errors).await);
+        assert_eq!(errors, 1);
+        let good = LinkMessage::RobotPose { stamp, world_t_lidar: Isometry3::identity() };
+        assert!(publish(&link, &good, &mut errors).await);
+        assert_eq!(errors, 1);
+        link.close().await.unwrap();
+    }
 }

@@ -135,6 +135,49 @@ impl Drop for MockMotors {
     }
 }
 
+/// Bytes a client that reads slowly has not taken yet, at most this many: beyond it whole lines
+/// are dropped (a full USB buffer), never a part of one.
+const MAX_PENDING_BYTES: usize = 16 * 1024;
+
+/// What is waiting to go to the client, and whether the last byte that went ended a line.
+#[derive(Default)]
+struct Pending {
+    bytes: Vec<u8>,
+    mid_line: bool,
+}
+
+impl Pending {
+    fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+}
+
+/// Sends what fits of `pending` and then `out` (moved into it); what does not fit waits for
+/// the next call. A slcan client parses lines: a line cut short and followed by the next one
+/// reads as garbage (python-can raises on it), so only whole lines are ever dropped: the
+/// line already started is finished first. Returns the bytes dropped.
+fn send_lines(pty: &PtyDevice, pending: &mut Pending, out: &mut Vec<u8>) -> usize {
+    pending.bytes.append(out);
+    let left = pty.write_now(&pending.bytes);
+    let written = pending.bytes.len() - left;
+    if written > 0 {
+        pending.mid_line = !matches!(pending.bytes.get(written - 1), Some(b'\r' | 0x07));
+    }
+    pending.bytes.drain(..written);
+    if pending.bytes.len() <= MAX_PENDING_BYTES {
+        return 0;
+    }
+    // Keep the rest of a started line, drop every whole line after it.
+    let keep = if pending.mid_line {
+        pending.bytes.iter().position(|b| matches!(b, b'\r' | 0x07)).map_or(pending.bytes.len(), |i| i + 1)
+    } else {
+        0
+    };
+    let dropped = pending.bytes.len() - keep;
+    pending.bytes.truncate(keep);
+    dropped
+}
+
 async fn run(
     pty: PtyDevice,
     mut device: MotorsDevice,
@@ -148,6 +191,7 @@ async fn run(
     let mut buf = vec![0u8; 4096];
     let mut out = Vec::with_capacity(4096);
     let mut overflow = 0u64;
+    let mut pending = Pending::default();
     let mut ticks = 0u64;
     loop {
         tokio::select! {
@@ -165,9 +209,8 @@ async fn run(
                 }
             }
         }
-        if !out.is_empty() {
-            overflow += pty.write_now(&out) as u64;
-            out.clear();
+        if !out.is_empty() || !pending.is_empty() {
+            overflow += send_lines(&pty, &mut pending, &mut out) as u64;
         }
     }
     let mut stats = device.stats();

@@ -322,9 +322,11 @@ impl AlignConfig {
         if self.global_candidates > 0
             && (global.iter().any(|v| !(v.is_finite() && *v > 0.0))
                 || !(self.global_min_curvature.is_finite() && self.global_min_curvature >= 0.0)
-                || self.global_matches_per_point == 0)
+                || self.global_matches_per_point == 0
+                || self.global_source_keypoints == 0
+                || self.global_target_keypoints == 0)
         {
-            return bad("global_* sizes must be positive, global_min_curvature not negative, global_matches_per_point at least 1");
+            return bad("global_* sizes must be positive, global_min_curvature not negative, global_matches_per_point and the keypoint counts at least 1");
         }
         if !(0.0..=1.0).contains(&self.overlap_min_ratio) || !(0.0..=1.0).contains(&self.overlap_min_share) {
             return bad("overlap_min_ratio and overlap_min_share must be in [0, 1]");

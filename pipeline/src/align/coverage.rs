@@ -12,8 +12,9 @@ use serde::Serialize;
 /// A ray is walked this many voxels short of its end: the surface it hit, its noise, and the
 /// voxels it grazed on the way in are not free.
 const END_MARGIN_VOXELS: f64 = 2.0;
-/// A ray longer than this many steps is walked only this far.
-const MAX_STEPS: usize = 2048;
+/// A ray is walked at most this far: farther returns of an indoor robot are few, and an
+/// outdoor one's would grow the coverage without bound.
+const MAX_RAY_M: f64 = 40.0;
 
 /// Voxels the robot's rays crossed, with how many rays crossed each (saturating).
 #[derive(Clone, Debug)]
@@ -55,7 +56,7 @@ impl Coverage {
         }
         let dir = d.normalize();
         let step_m = 0.5 * self.voxel_m;
-        let steps = ((free_m / step_m) as usize).min(MAX_STEPS);
+        let steps = (free_m.min(MAX_RAY_M) / step_m) as usize;
         let mut last = None;
         for k in 0..=steps {
             let key = key_of(&(origin + dir * (k as f64 * step_m)), self.inv_voxel_m);
@@ -84,12 +85,13 @@ pub struct Overlap {
 }
 
 impl Overlap {
-    /// Explained over the points the robot has covered (explained or contradicted); 0 when it
-    /// covered none.
+    /// Explained over the points the robot has covered (explained or contradicted); 1 when it
+    /// covered none (nothing contradicts; [`Self::explained_share`] then says there is nothing
+    /// to judge by).
     pub fn ratio(&self) -> f64 {
         let covered = self.explained + self.contradicted;
         if covered == 0 {
-            0.0
+            1.0
         } else {
             self.explained as f64 / covered as f64
         }
@@ -125,6 +127,6 @@ mod tests {
         let o = Overlap { points: 100, explained: 30, contradicted: 2 };
         assert!((o.ratio() - 30.0 / 32.0).abs() < 1e-12);
         assert!((o.explained_share() - 0.3).abs() < 1e-12);
-        assert_eq!(Overlap::default().ratio(), 0.0);
+        assert_eq!(Overlap::default().ratio(), 1.0);
     }
 }

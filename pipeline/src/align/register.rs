@@ -208,6 +208,11 @@ pub struct Aligner {
     pub prepare_ms: f64,
 }
 
+/// Fewer contradicted points than this never refuse a fit on their own (a person who stepped
+/// where the robot saw through, a few noisy returns): the overlap ratio of a small window is
+/// noise.
+const MIN_CONTRADICTED_POINTS: usize = 20;
+
 /// Only weak directions at least this much translation are settled: a weak turn (about a long
 /// corridor's axis) is left to ICP.
 const SETTLE_MIN_TRANSLATION_SHARE: f64 = 0.9;
@@ -576,10 +581,11 @@ impl Aligner {
         global::consensus(&pairs, &p)
             .into_iter()
             .map(|g| {
-                // The candidate levels the source on its own; keep the guess's roll and pitch.
-                let yaw = (g.pose.rotation * initial.rotation.inverse()).euler_angles().2;
-                let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw) * initial.rotation;
-                let pose = Isometry3::from_parts(g.pose.translation, rot);
+                // Both clouds are level, so the candidate (a turn about the vertical) is used as
+                // it is; its yaw and shift from the guess are for the report.
+                let yaw = g.pose.rotation.euler_angles().2 - initial.rotation.euler_angles().2;
+                let yaw = yaw.sin().atan2(yaw.cos());
+                let pose = g.pose;
                 let shift = pose.translation.vector - initial.translation.vector;
                 SeedStart {
                     pose,
@@ -941,7 +947,7 @@ impl Aligner {
             }
             None => {}
             Some(o) => {
-                if !at_most(c.overlap_min_ratio, o.ratio()) {
+                if o.contradicted >= MIN_CONTRADICTED_POINTS && !at_most(c.overlap_min_ratio, o.ratio()) {
                     why.push(Rejection::Contradicted {
                         ratio: o.ratio(),
                         min: c.overlap_min_ratio,

@@ -1,7 +1,7 @@
 //! The LIO front to back: static init, IMU propagation, de-skew, iterated update, map growth.
 
 use super::deskew::deskew;
-use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit};
+use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::ivox::VoxelMap;
 use super::propagate::{step, ImuNoise, Knot};
@@ -121,6 +121,10 @@ pub struct Lio {
     /// The clock of the first input; inputs on any other are refused and counted.
     clock: Option<Clock>,
     other_clock_inputs: u64,
+    /// IMU samples refused for a non-finite value, and times the filter started over because
+    /// its state went non-finite.
+    non_finite_inputs: u64,
+    resets: u64,
 }
 
 impl Lio {
@@ -156,6 +160,8 @@ impl Lio {
             wheels: VecDeque::new(),
             clock: None,
             other_clock_inputs: 0,
+            non_finite_inputs: 0,
+            resets: 0,
             cfg,
         }
     }
@@ -193,6 +199,13 @@ impl Lio {
 
     /// Feeds one IMU sample (in time order); scans waiting for it are processed into `out`.
     pub fn push_imu(&mut self, s: ImuSample, out: &mut Vec<ScanOutput>) {
+        if !s.gyro_rad_s.iter().chain(s.acc_m_s2.iter()).all(|v| v.is_finite()) {
+            self.non_finite_inputs += 1;
+            if self.non_finite_inputs.is_power_of_two() {
+                tracing::warn!(refused = self.non_finite_inputs, "LIO: an IMU sample with a non-finite value refused");
+            }
+            return;
+        }
         if !self.on_my_clock(s.clock) {
             return;
         }
@@ -278,9 +291,29 @@ impl Lio {
                 return;
             }
             if let Some(scan) = self.scans.pop_front() {
+                if !self.state.is_finite() {
+                    self.start_over();
+                    return;
+                }
                 out.push(self.process(&scan));
             }
         }
+    }
+
+    /// The filter starts over from initialisation (it needs the device to stand still again),
+    /// keeping its clock and counters: a non-finite state would spread into every later pose
+    /// and into the map. Its map goes too: the new filter's world is not the old one.
+    fn start_over(&mut self) {
+        let (clock, other, non_finite, resets) =
+            (self.clock, self.other_clock_inputs, self.non_finite_inputs, self.resets + 1);
+        *self = Lio::new(self.cfg.clone());
+        (self.clock, self.other_clock_inputs, self.non_finite_inputs, self.resets) = (clock, other, non_finite, resets);
+        tracing::error!(resets, "LIO: the state went non-finite; the filter starts over (stand still to initialise)");
+    }
+
+    /// IMU samples refused for a non-finite value, and times the filter started over.
+    pub fn non_finite_counts(&self) -> (u64, u64) {
+        (self.non_finite_inputs, self.resets)
     }
 
     /// Propagates to `t_ns` with the buffered IMU, recording knots.
@@ -311,8 +344,11 @@ impl Lio {
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
         let wheel = self.wheel_step(scan.end_ns);
         let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
-        let mut used =
-            voxel_downsample(self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq), self.cfg.scan_voxel_m);
+        // A non-finite point fails the comparison (NaN) or is kept out explicitly (infinity).
+        let mut used = voxel_downsample(
+            self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq && p.iter().all(|v| v.is_finite())),
+            self.cfg.scan_voxel_m,
+        );
         thin_out(&mut used, self.cfg.max_points);
         let (mut report, mut verdict) = (UpdateReport::default(), None);
         if !self.map.is_empty() {
@@ -337,6 +373,8 @@ impl Lio {
                 weak_directions: report.weak_directions,
             };
             let v = self.monitor.judge(&self.cfg.health, scan.end_ns, &fit);
+            // An update that came out non-finite is refused like any other bad scan.
+            let v = if self.state.is_finite() { v } else { Verdict { refused: Some(Refusal::LargeResidual), ..v } };
             if v.refused.is_some() {
                 self.state = prior;
                 self.cov = prior_cov;
@@ -445,6 +483,39 @@ mod tests {
         assert_eq!(lio.other_clock_inputs(), 2);
         lio.push_imu(still(10_000_000, Clock::Ptp), &mut out);
         assert_eq!(lio.other_clock_inputs(), 2, "the filter's own clock still enters");
+    }
+
+    #[test]
+    fn non_finite_imu_is_refused_and_a_non_finite_state_starts_the_filter_over() {
+        let mut lio = Lio::new(LioConfig::default());
+        let mut out = Vec::new();
+        let still = |t_ns| ImuSample {
+            t_ns,
+            clock: Clock::Ptp,
+            gyro_rad_s: Vector3::zeros(),
+            acc_m_s2: Vector3::new(0.0, 0.0, 9.81),
+        };
+        // Two seconds standing still initialise it.
+        for k in 0..=400u64 {
+            lio.push_imu(still(k * 5_000_000), &mut out);
+        }
+        assert_eq!(lio.status(), LioStatus::Running);
+        let mut bad = still(2_010_000_000);
+        bad.gyro_rad_s.x = f64::NAN;
+        lio.push_imu(bad, &mut out);
+        bad.acc_m_s2.z = f64::INFINITY;
+        lio.push_imu(bad, &mut out);
+        assert_eq!(lio.non_finite_counts(), (2, 0));
+        assert!(lio.state().is_finite());
+        // A state gone non-finite anyway: the next scan starts the filter over, no output.
+        lio.state.vel.x = f64::NAN;
+        let scan = LioScan { start_ns: 2_000_000_000, end_ns: 2_050_000_000, clock: Clock::Ptp, points: Vec::new() };
+        lio.push_scan(scan, &mut out);
+        lio.push_imu(still(2_100_000_000), &mut out);
+        assert!(out.is_empty(), "{out:?}");
+        assert_eq!(lio.non_finite_counts(), (2, 1));
+        assert!(matches!(lio.status(), LioStatus::Initializing(_)));
+        assert!(lio.state().is_finite());
     }
 
     #[test]

@@ -34,6 +34,13 @@ pub struct State {
 }
 
 impl State {
+    /// Whether every part of the state is a finite number (a NaN that got in would spread
+    /// through every later scan and into the map).
+    pub fn is_finite(&self) -> bool {
+        let vectors = [self.pos, self.vel, self.bias_gyro, self.bias_acc, self.gravity];
+        vectors.iter().all(|v| v.iter().all(|x| x.is_finite())) && self.rot.matrix().iter().all(|x| x.is_finite())
+    }
+
     /// `self [+] dx`.
     pub fn boxplus(&self, dx: &ErrVec) -> Self {
         let mut s = self.clone();

@@ -67,8 +67,8 @@ pub struct UpdateReport {
     /// Directions of the pose that took no update in the last iteration (0 to 6).
     pub weak_directions: usize,
     /// Which axes those directions mostly lie along: bit k for axis k of the update's error
-    /// state (rx, ry, rz: turns; x, y, z: moves), the largest component of each weak direction
-    /// (a corridor along x sets bit 3). [`weak_axes_names`] spells it out.
+    /// state (rx, ry, rz: turns; x, y, z: moves) when more than half of that axis lies in the
+    /// weak directions (a corridor along x sets bit 3). [`weak_axes_names`] spells it out.
     pub weak_axes: u8,
 }
 
@@ -217,13 +217,15 @@ impl NormalEquations {
         if report.weak_directions > 0 && tracing::enabled!(tracing::Level::TRACE) {
             trace_weak_directions(&eigen, cfg, it);
         }
-        report.weak_axes = 0;
+        // The weak subspace's projector: its diagonal says how much of each axis lies in it,
+        // whatever basis the eigen-solver picked inside a repeated eigenvalue.
+        let mut weak = Matrix6::<f64>::zeros();
         for (l, v) in eigen.eigenvalues.iter().zip(eigen.eigenvectors.column_iter()) {
-            let axis = v.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map(|(k, _)| k);
-            if let (true, Some(k)) = (*l < cfg.min_direction_info, axis) {
-                report.weak_axes |= 1 << k;
+            if *l < cfg.min_direction_info {
+                weak += v * v.transpose();
             }
         }
+        report.weak_axes = (0..6).filter(|&k| weak[(k, k)] > 0.5).fold(0u8, |m, k| m | (1 << k));
         if report.weak_directions > 0 {
             self.keep_strong_directions(&eigen, &s, cfg);
         }

@@ -310,10 +310,11 @@ impl RigCore {
         self.start_hint.as_ref()
     }
 
-    /// The rig's odometry frame in the world, as the start hint places it (at the origin
-    /// without one).
+    /// The rig's odometry frame in the world, as the start hint places it. Without one, the
+    /// world's own axes: both frames are levelled by gravity, so the search starts level
+    /// (the rig's first pose may be tilted: a helmet looking down).
     fn hint_world_t_odom(&self) -> Isometry3<f64> {
-        self.start_hint.unwrap_or_else(Isometry3::identity) * self.first_pose.inverse()
+        self.start_hint.map_or_else(Isometry3::identity, |h| h * self.first_pose.inverse())
     }
 
     /// The settings of the next registration: tracking once aligned; the seed search before,
@@ -486,7 +487,7 @@ impl RigCore {
         if !tracking || !self.aligned() {
             return AlignVerdict::Refused(failure);
         }
-        self.contradicted_in_row = if contradicts { self.contradicted_in_row + 1 } else { 0 };
+        self.contradicted_in_row = if contradicts { self.contradicted_in_row.saturating_add(1) } else { 0 };
         let limit = self.cfg.lose_after_contradictions;
         if limit == 0 || self.contradicted_in_row < limit {
             return AlignVerdict::Refused(failure);
@@ -494,6 +495,8 @@ impl RigCore {
         self.world.lose();
         self.contradicted_in_row = 0;
         self.lost += 1;
+        // Search again at the next scan, not after the re-registration interval.
+        self.next_align_ns = 0;
         AlignVerdict::Lost(failure)
     }
 
