@@ -8,6 +8,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+#[path = "support/base_toml.rs"]
+mod base_toml;
+use base_toml::slcan_base_toml;
 use starc_base::cia402::DriveState;
 use starc_hil::motors::pty::PtyDevice;
 use starc_hil::motors::{MockMotors, MockMotorsConfig, MockProtocol, MotorsStats};
@@ -49,34 +52,8 @@ impl Drop for Host {
 
 fn write_config(dir: &Path, port: &Path) -> std::path::PathBuf {
     let path = dir.join("base.toml");
-    let text = format!(
-        r#"
-[can]
-transport = "slcan"
-port = "{}"
-status_poll_ms = 100
-[kinematics]
-model = "omni3"
-wheel_radius_m = 0.05
-center_to_wheel_m = 0.2
-[limits]
-max_vx_m_s = 1.0
-max_vy_m_s = 1.0
-max_wz_rad_s = 2.0
-max_accel_m_s2 = 4.0
-max_alpha_rad_s2 = 8.0
-max_wheel_rad_s = 40.0
-[motors]
-protocol = "cia402"
-wheels = [{{ id = 1 }}, {{ id = 2 }}, {{ id = 3 }}]
-[motors.cia402]
-host_node_id = 127
-host_heartbeat_ms = 50
-consumer_heartbeat_ms = 150
-abort_connection_option = 3
-"#,
-        port.display()
-    );
+    let cia402 = "[motors.cia402]\nhost_node_id = 127\nhost_heartbeat_ms = 50\nconsumer_heartbeat_ms = 150\nabort_connection_option = 3";
+    let text = slcan_base_toml(port, "cia402", "{ id = 1 }, { id = 2 }, { id = 3 }", (4.0, 8.0), cia402);
     std::fs::write(&path, text).unwrap();
     path
 }

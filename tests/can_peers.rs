@@ -12,6 +12,9 @@
 //! socat comes from Debian. In CI (CI set) a missing peer fails the test; elsewhere it is skipped.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+#[path = "support/base_toml.rs"]
+mod base_toml;
+use base_toml::slcan_base_toml;
 use starc_base::runner::{spawn, BaseHandle, RunnerOptions};
 use starc_base::{Base, BaseConfig, BaseEvent, DriveMode, Fault, Twist};
 use starc_can::slcan::{SlcanBus, SlcanOptions};
@@ -155,32 +158,7 @@ fn socat_pair(a: &Path, b: &Path) -> Option<Socat> {
 }
 
 fn config_toml(protocol: &str, port: &Path, ids: &str, extra: &str) -> BaseConfig {
-    let text = format!(
-        r#"
-watchdog_ms = 200
-[can]
-transport = "slcan"
-port = "{}"
-status_poll_ms = 100
-[kinematics]
-model = "omni3"
-wheel_radius_m = 0.05
-center_to_wheel_m = 0.2
-[limits]
-max_vx_m_s = 1.0
-max_vy_m_s = 1.0
-max_wz_rad_s = 2.0
-max_accel_m_s2 = 2.0
-max_alpha_rad_s2 = 6.0
-max_wheel_rad_s = 40.0
-[motors]
-protocol = "{protocol}"
-wheels = [{ids}]
-{extra}
-"#,
-        port.display()
-    );
-    BaseConfig::from_toml(&text).unwrap()
+    BaseConfig::from_toml(&slcan_base_toml(port, protocol, ids, (2.0, 6.0), extra)).unwrap()
 }
 
 async fn start_base(config: BaseConfig, port: &Path, options: SlcanOptions) -> (BaseHandle, Receiver<BaseEvent>) {

@@ -218,4 +218,4 @@ impl Base {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -6,7 +6,8 @@ use crate::config::BaseConfig;
 use starc_can::RxFrame;
 use starc_time::Clock;
 
-const CONFIG: &str = r#"
+/// A three-wheel C620 base (also the runner tests' base).
+pub(crate) const CONFIG: &str = r#"
 watchdog_ms = 200
 [can]
 transport = "socketcan"

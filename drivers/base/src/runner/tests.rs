@@ -9,27 +9,10 @@ use starc_can::RxFrame;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-const CONFIG: &str = r#"
-watchdog_ms = 200
-send_timeout_ms = 30
-[can]
-transport = "socketcan"
-interface = "can0"
-[kinematics]
-model = "omni3"
-wheel_radius_m = 0.05
-center_to_wheel_m = 0.2
-[limits]
-max_vx_m_s = 1.0
-max_vy_m_s = 1.0
-max_wz_rad_s = 2.0
-max_accel_m_s2 = 100.0
-max_alpha_rad_s2 = 100.0
-max_wheel_rad_s = 50.0
-[motors]
-protocol = "c620"
-wheels = [{ id = 1 }, { id = 2 }, { id = 3 }]
-"#;
+/// The controller tests' base, with a short send time-out.
+fn config() -> String {
+    format!("send_timeout_ms = 30\n{}", crate::controller::tests::CONFIG)
+}
 
 /// What the fake bus saw and how it misbehaves; shared with the test.
 #[derive(Default)]
@@ -101,7 +84,7 @@ impl CanBus for FakeBus {
 }
 
 fn base() -> Base {
-    Base::new(BaseConfig::from_toml(CONFIG).unwrap_or_else(|e| panic!("{e}"))).unwrap_or_else(|e| panic!("{e}"))
+    Base::new(BaseConfig::from_toml(&config()).unwrap_or_else(|e| panic!("{e}"))).unwrap_or_else(|e| panic!("{e}"))
 }
 
 use crate::config::BaseConfig;
