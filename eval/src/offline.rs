@@ -177,8 +177,7 @@ impl Run {
         match ev {
             MissionEvent::RobotPose { end_ns, pose, lio_ms, health } => {
                 if let Some(sc) = self.score.as_mut() {
-                    sc.robot_pose(end_ns, &pose);
-                    sc.robot_health(end_ns, health);
+                    sc.robot_pose(end_ns, &pose, Some(health));
                 }
                 self.robot_tum.push(tum_line(end_ns, &pose));
                 self.slam_ms.push(lio_ms);

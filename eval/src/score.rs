@@ -112,23 +112,17 @@ impl Scorer {
         }
     }
 
-    /// A robot LIO pose; the first one ties the robot's LIO world to the truth's, and each is
+    /// A robot LIO pose, with the LIO's health when the run reports it (offline; see
+    /// [`crate::drift`]); the first one ties the robot's LIO world to the truth's, and each is
     /// scored against the truth in it. The robot reports a scan's detection before its pose.
-    pub fn robot_pose(&mut self, end_ns: u64, lidar_pose: &Isometry3<f64>) {
+    pub fn robot_pose(&mut self, end_ns: u64, lidar_pose: &Isometry3<f64>, health: Option<Health>) {
         let truth = at(&self.truth.gt_robot, end_ns);
         let l_t_w = *self.lio_t_world.get_or_insert_with(|| lidar_pose * truth.inverse());
         let (m, deg) = pose_error(&(l_t_w * truth), lidar_pose);
         self.robot_err_m.push(m);
-        self.robot_series.push((end_ns, m, None));
+        self.robot_series.push((end_ns, m, health));
         self.robot_err_deg.push(deg);
         self.robot_ns = Some(self.robot_ns.map_or(end_ns, |t| t.max(end_ns)));
-    }
-
-    /// The robot LIO's health at a scored pose (offline runs report it; see [`crate::drift`]).
-    pub fn robot_health(&mut self, end_ns: u64, health: Health) {
-        if let Some(last) = self.robot_series.last_mut().filter(|p| p.0 == end_ns) {
-            last.2 = Some(health);
-        }
     }
 
     /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
@@ -423,7 +417,7 @@ mod tests {
         for (i, &t) in times.iter().enumerate() {
             let truth = at(&score.truth.gt_robot, t);
             let pose = if i == 0 { lio_t_world * truth } else { lio_t_world * off * truth * turn };
-            score.robot_pose(t, &pose);
+            score.robot_pose(t, &pose, None);
         }
         let out = tempfile::tempdir().unwrap();
         let memory = MemoryReport { peak_rss_mib: None, note: None };

@@ -21,8 +21,7 @@ pub mod lio;
 pub mod mission;
 pub mod pose;
 pub mod record;
-#[cfg(test)]
-mod test_rng;
+pub(crate) mod rng;
 pub mod timing;
 pub mod voxel_hash;
 

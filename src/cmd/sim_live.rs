@@ -331,7 +331,7 @@ impl Tally {
         while let Ok(ev) = robot_rx.try_recv() {
             match ev {
                 RobotEvent::Pose { end_ns, lidar_pose, .. } => {
-                    score.robot_pose(end_ns, &lidar_pose);
+                    score.robot_pose(end_ns, &lidar_pose, None);
                     self.robot_tum.push(tum_line(end_ns, &lidar_pose));
                 }
                 RobotEvent::Detection { detection } => {

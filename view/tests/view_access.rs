@@ -12,6 +12,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+use common::{peer_python, root};
 use serde_json::Value;
 use starc_pipeline::ar::ArFrame;
 use starc_pipeline::record::Topic;
@@ -20,7 +22,6 @@ use starc_view::{
     ViewStatus, ViewToken,
 };
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -31,10 +32,6 @@ const FLOOD: usize = 1000;
 const MAX_CONNECTIONS: usize = 64;
 const PER_ADDRESS: usize = 8;
 const TOKEN: &str = "test-token-0123456789abcdef";
-
-fn root() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
 
 fn access(request_timeout: Duration, token: Option<&str>) -> ViewAccess {
     ViewAccess {
@@ -122,16 +119,6 @@ async fn curl(url: String, extra: Vec<String>) -> (String, String, String) {
     })
     .await
     .unwrap()
-}
-
-fn peer_python() -> PathBuf {
-    let python = root().join(".venv/bin/python");
-    let ok = Command::new(&python)
-        .args(["-c", "import websockets, mcap_ros2._dynamic, rosbags.typesys"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    assert!(ok, "peers missing from .venv: .venv/bin/pip install -r tests/peers/requirements.txt");
-    python
 }
 
 /// Runs the Foxglove peer to the end (killed after 30 s) and parses its last line.

@@ -9,34 +9,20 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+use common::{peer_python, root};
 use serde_json::Value;
 use starc_pipeline::cloud::{CloudPoint, PointCloud};
 use starc_pipeline::record::msgs::{Header, Marker, MarkerArray, Pose, Time, Vector3};
 use starc_pipeline::record::writer::cloud_to_msg;
 use starc_pipeline::record::{msgs::RosMessage, Topic};
 use starc_view::{ChannelSpec, FoxgloveServer};
-use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 const T0_NS: u64 = 1_763_719_200_000_000_000;
 
 /// The workspace root, where .venv and tests/peers live.
-fn root() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-/// The venv's python with the peers; a missing peer is a failure, not a skip.
-fn peer_python() -> PathBuf {
-    let python = root().join(".venv/bin/python");
-    let ok = Command::new(&python)
-        .args(["-c", "import websockets, mcap_ros2._dynamic, rosbags.typesys"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    assert!(ok, "peers websockets / mcap-ros2-support / rosbags missing from .venv: .venv/bin/pip install -r tests/peers/requirements.txt");
-    python
-}
-
 /// Starts the peer; it is killed if the test ends first.
 struct Peer(Option<std::process::Child>);
 

@@ -113,40 +113,74 @@ impl VoxelIndex {
     }
 }
 
-/// PCA normals from the `k` nearest neighbours within `radius_m`; `None` where fewer than 5
-/// neighbours are found or the neighbourhood is not plane-like (smallest eigenvalue above a third
-/// of the middle one: a corner or scattered points, where a plane has no meaning).
-pub fn estimate_normals(points: &[Vec3], radius_m: f64, k: usize) -> Vec<Option<Vec3>> {
-    let index = VoxelIndex::new(points.to_vec(), radius_m);
-    let mut nn = Vec::with_capacity(64);
-    points
+/// The shape of a neighbourhood: the unit normal (eigenvector of the smallest eigenvalue of the
+/// points' covariance) and the eigenvalues, smallest first.
+#[derive(Clone, Copy, Debug)]
+pub struct LocalShape {
+    pub normal: Vec3,
+    pub eigenvalues: [f64; 3],
+}
+
+impl LocalShape {
+    /// Smallest eigenvalue over their sum: 0 on a plane, 1/3 for scattered points.
+    pub fn curvature(&self) -> f64 {
+        let total: f64 = self.eigenvalues.iter().sum();
+        if total > 0.0 {
+            self.eigenvalues[0].max(0.0) / total
+        } else {
+            0.0
+        }
+    }
+}
+
+/// PCA of the `k` nearest neighbours of each point within the index's cell; `None` where fewer
+/// than 5 are found.
+pub fn local_shapes(index: &VoxelIndex, k: usize) -> Vec<Option<LocalShape>> {
+    let mut nn = Vec::with_capacity(k.min(256));
+    index
+        .points
         .iter()
         .map(|p| {
             index.k_nearest(p, k, &mut nn);
             if nn.len() < 5 {
                 return None;
             }
-            let mut mean = Vec3::zeros();
-            for &(_, i) in &nn {
-                mean += index.points.get(i as usize)?;
-            }
-            mean /= nn.len() as f64;
-            let mut cov = Matrix3::zeros();
-            for &(_, i) in &nn {
-                let d = index.points.get(i as usize)? - mean;
-                cov += d * d.transpose();
-            }
+            let near = nn.iter().filter_map(|&(_, i)| index.points.get(i as usize));
+            let mean = near.clone().sum::<Vec3>() / nn.len() as f64;
+            let cov = near.fold(Matrix3::zeros(), |acc, q| acc + (q - mean) * (q - mean).transpose());
             let eig = SymmetricEigen::new(cov);
             let mut idx = [0usize, 1, 2];
             idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-            let (l0, l1) = (eig.eigenvalues[idx[0]], eig.eigenvalues[idx[1]]);
-            if l1 <= 0.0 || l0 > l1 / 3.0 {
-                return None;
-            }
-            let n: Vec3 = eig.eigenvectors.column(idx[0]).into_owned();
-            Some(n.normalize())
+            let normal: Vec3 = eig.eigenvectors.column(idx[0]).into_owned();
+            let eigenvalues = idx.map(|i| eig.eigenvalues[i]);
+            (normal.norm() > 0.0).then(|| LocalShape { normal: normal.normalize(), eigenvalues })
         })
         .collect()
+}
+
+/// PCA normals from the `k` nearest neighbours within `radius_m`; `None` where fewer than 5
+/// neighbours are found or the neighbourhood is not plane-like (smallest eigenvalue above a third
+/// of the middle one: a corner or scattered points, where a plane has no meaning).
+pub fn estimate_normals(points: &[Vec3], radius_m: f64, k: usize) -> Vec<Option<Vec3>> {
+    let index = VoxelIndex::new(points.to_vec(), radius_m);
+    local_shapes(&index, k)
+        .into_iter()
+        .map(|s| {
+            let s = s?;
+            let [l0, l1, _] = s.eigenvalues;
+            (l1 > 0.0 && l0 <= l1 / 3.0).then_some(s.normal)
+        })
+        .collect()
+}
+
+/// At most `max` of `items`, taken evenly through them (the voxel order spreads points in
+/// space); all of them when `max` is 0.
+pub fn thin<T: Copy>(items: Vec<T>, max: usize) -> Vec<T> {
+    if items.len() <= max || max == 0 {
+        return items;
+    }
+    let step = items.len() as f64 / max as f64;
+    (0..max).filter_map(|i| items.get((i as f64 * step) as usize).copied()).collect()
 }
 
 /// SE(3) exponential of a twist (rotation vector first, then translation), as used for the

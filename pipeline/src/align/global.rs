@@ -6,9 +6,10 @@
 //! pose (two matches fix yaw and translation). The best distinct poses seed the same NDT + ICP
 //! attempts and acceptance tests as the yaw grid's seeds: this stage only proposes.
 
-use super::geometry::{Vec3, VoxelIndex};
+use super::config::AlignConfig;
+use super::geometry::{local_shapes, thin, Vec3, VoxelIndex};
 use crate::voxel_hash::voxel_downsample;
-use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 /// Histogram bins of each feature: the angle between the centre's normal and the line to a
 /// neighbour, the neighbour's normal and that line, the two normals (all as |cos|: normals of
@@ -19,21 +20,6 @@ pub const DIMS: usize = 29;
 
 /// Neighbours a descriptor or normal is computed from, at most.
 const MAX_NEIGHBOURS: usize = 64;
-
-/// Settings of the global stage (from [`super::AlignConfig`]'s `global_*`).
-#[derive(Clone, Debug)]
-pub struct GlobalParams {
-    pub voxel_m: f64,
-    pub normal_radius_m: f64,
-    pub radius_m: f64,
-    pub min_curvature: f64,
-    pub source_keypoints: usize,
-    pub target_keypoints: usize,
-    pub matches_per_point: usize,
-    pub pair_samples: usize,
-    pub inlier_m: f64,
-    pub candidates: usize,
-}
 
 /// A cloud's keypoints and their descriptors.
 pub struct Described {
@@ -46,30 +32,6 @@ pub struct Described {
 pub struct Candidate {
     pub pose: Isometry3<f64>,
     pub votes: usize,
-}
-
-/// Normal and curvature (smallest eigenvalue over the sum) of each point, from its neighbours
-/// within the index's cell; `None` with fewer than 5 neighbours.
-fn normals(index: &VoxelIndex) -> Vec<Option<(Vec3, f64)>> {
-    let mut nn = Vec::with_capacity(MAX_NEIGHBOURS);
-    index
-        .points
-        .iter()
-        .map(|p| {
-            index.k_nearest(p, MAX_NEIGHBOURS, &mut nn);
-            if nn.len() < 5 {
-                return None;
-            }
-            let near: Vec<Vec3> = nn.iter().filter_map(|&(_, i)| index.points.get(i as usize).copied()).collect();
-            let mean = near.iter().sum::<Vec3>() / near.len() as f64;
-            let cov = near.iter().fold(Matrix3::zeros(), |acc, q| acc + (q - mean) * (q - mean).transpose());
-            let eig = SymmetricEigen::new(cov);
-            let (k, smallest) = eig.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
-            let total = eig.eigenvalues.sum();
-            let n: Vec3 = eig.eigenvectors.column(k).into_owned();
-            (total > 0.0 && n.norm() > 0.0).then(|| (n.normalize(), smallest.max(0.0) / total))
-        })
-        .collect()
 }
 
 /// Adds `value` (in [lo, hi]) to `bins` bins starting at `offset`.
@@ -108,14 +70,15 @@ fn spfh(p: &Vec3, n: &Vec3, neighbours: &[(Vec3, Vec3)]) -> [f32; DIMS] {
     h
 }
 
-/// Keypoints of `points` (reduced to `voxel_m`; those where the surface bends, thinned evenly
-/// to `max_keypoints`) and their descriptors: each point's histogram averaged with its
+/// Keypoints of `points` (reduced to `global_voxel_m`; those where the surface bends, thinned
+/// evenly to `max_keypoints`) and their descriptors: each point's histogram averaged with its
 /// neighbours' (weighted by inverse distance), as FPFH does.
-pub fn describe(points: &[Vec3], p: &GlobalParams, max_keypoints: usize) -> Described {
-    let reduced = voxel_downsample(points, p.voxel_m);
-    let normal_index = VoxelIndex::new(reduced.clone(), p.normal_radius_m);
-    let shape = normals(&normal_index);
-    let index = VoxelIndex::new(reduced, p.radius_m);
+pub fn describe(points: &[Vec3], c: &AlignConfig, max_keypoints: usize) -> Described {
+    let reduced = voxel_downsample(points, c.global_voxel_m);
+    let normal_index = VoxelIndex::new(reduced.clone(), c.global_normal_radius_m);
+    let shape: Vec<Option<(Vec3, f64)>> =
+        local_shapes(&normal_index, MAX_NEIGHBOURS).into_iter().map(|s| s.map(|s| (s.normal, s.curvature()))).collect();
+    let index = VoxelIndex::new(reduced, c.global_radius_m);
     let mut nn = Vec::with_capacity(MAX_NEIGHBOURS);
     let neighbours_of = |i: usize, nn: &mut Vec<(f64, u32)>| -> Vec<usize> {
         let Some(q) = index.points.get(i) else { return Vec::new() };
@@ -135,10 +98,10 @@ pub fn describe(points: &[Vec3], p: &GlobalParams, max_keypoints: usize) -> Desc
     let salient: Vec<usize> = (0..index.points.len())
         .filter(|&i| {
             spfhs.get(i).is_some_and(Option::is_some)
-                && shape.get(i).copied().flatten().is_some_and(|(_, c)| c >= p.min_curvature)
+                && shape.get(i).copied().flatten().is_some_and(|(_, k)| k >= c.global_min_curvature)
         })
         .collect();
-    let keep = thin_indices(&salient, max_keypoints);
+    let keep = thin(salient, max_keypoints);
     let mut out = Described { points: Vec::with_capacity(keep.len()), descriptors: Vec::with_capacity(keep.len()) };
     for i in keep {
         let (Some(p_i), Some(Some(own))) = (index.points.get(i), spfhs.get(i)) else { continue };
@@ -146,7 +109,7 @@ pub fn describe(points: &[Vec3], p: &GlobalParams, max_keypoints: usize) -> Desc
         let mut total = 0.0f32;
         for j in neighbours_of(i, &mut nn) {
             let (Some(q), Some(Some(h))) = (index.points.get(j), spfhs.get(j)) else { continue };
-            let w = (1.0 / (q - p_i).norm().max(p.voxel_m)) as f32;
+            let w = (1.0 / (q - p_i).norm().max(c.global_voxel_m)) as f32;
             for (s, v) in sum.iter_mut().zip(h) {
                 *s += w * v;
             }
@@ -162,15 +125,6 @@ pub fn describe(points: &[Vec3], p: &GlobalParams, max_keypoints: usize) -> Desc
         out.descriptors.push(d);
     }
     out
-}
-
-/// At most `max` of `indices`, taken evenly through them.
-fn thin_indices(indices: &[usize], max: usize) -> Vec<usize> {
-    if indices.len() <= max || max == 0 {
-        return indices.to_vec();
-    }
-    let step = indices.len() as f64 / max as f64;
-    (0..max).filter_map(|k| indices.get((k as f64 * step) as usize).copied()).collect()
 }
 
 fn distance2(a: &[f32; DIMS], b: &[f32; DIMS]) -> f32 {
@@ -195,20 +149,6 @@ pub fn matches(source: &Described, target: &Described, k: usize) -> Vec<(Vec3, V
         out.extend(best.iter().filter_map(|&(_, j)| Some((*s, *target.points.get(j)?))));
     }
     out
-}
-
-/// A small deterministic generator (xorshift64*): the same window and map give the same
-/// candidates, so a rerun is byte-identical.
-struct Xorshift(u64);
-
-impl Xorshift {
-    fn below(&mut self, n: usize) -> usize {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let r = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((r >> 33) as usize) % n.max(1)
-    }
 }
 
 /// The 4-DoF pose two matches imply, when they agree on distances (horizontal and vertical)
@@ -253,30 +193,33 @@ fn refit(pairs: &[(Vec3, Vec3)], rot: &UnitQuaternion<f64>, translation: &Vec3, 
     Some((yaw, ct - r * cs))
 }
 
-/// The consensus: `pair_samples` random pairs of matches each propose a pose, scored by the
-/// matches within `inlier_m` of it; the best are refitted on their agreeing matches and the
-/// `candidates` best distinct ones (1 m or 15 deg apart) returned, most votes first.
-pub fn consensus(pairs: &[(Vec3, Vec3)], p: &GlobalParams) -> Vec<Candidate> {
+/// The consensus: `global_pair_samples` random pairs of matches each propose a pose, scored by
+/// the matches within `global_inlier_m` of it; the best are refitted on their agreeing matches
+/// and the `global_candidates` best distinct ones (1 m or 15 deg apart) returned, most votes
+/// first. The samples come from a fixed seed: the same matches give the same candidates.
+pub fn consensus(pairs: &[(Vec3, Vec3)], c: &AlignConfig) -> Vec<Candidate> {
     if pairs.len() < 2 {
         return Vec::new();
     }
-    let mut rng = Xorshift(0x9E37_79B9_7F4A_7C15);
+    let mut uniform = crate::rng::uniform(0x9E37_79B9_7F4A_7C15);
+    let mut pick = || ((uniform() * pairs.len() as f64) as usize).min(pairs.len() - 1);
+    let inlier_m = c.global_inlier_m;
     let mut found: Vec<(usize, f64, Vec3)> = Vec::new();
-    for _ in 0..p.pair_samples {
-        let (i, j) = (rng.below(pairs.len()), rng.below(pairs.len()));
+    for _ in 0..c.global_pair_samples {
+        let (i, j) = (pick(), pick());
         let (Some(a), Some(b)) = (pairs.get(i), pairs.get(j)) else { continue };
-        let Some((yaw, translation)) = pose_from_pair(a, b, 0.5 * p.inlier_m) else { continue };
+        let Some((yaw, translation)) = pose_from_pair(a, b, 0.5 * inlier_m) else { continue };
         let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
-        let v = votes(pairs, &rot, &translation, p.inlier_m);
+        let v = votes(pairs, &rot, &translation, inlier_m);
         if v >= 3 {
             found.push((v, yaw, translation));
         }
     }
     found.sort_by_key(|f| std::cmp::Reverse(f.0));
     let mut out: Vec<Candidate> = Vec::new();
-    for (_, yaw, translation) in found.into_iter().take(20 * p.candidates.max(1)) {
+    for (_, yaw, translation) in found.into_iter().take(20 * c.global_candidates.max(1)) {
         let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
-        let (yaw, translation) = refit(pairs, &rot, &translation, p.inlier_m).unwrap_or((yaw, translation));
+        let (yaw, translation) = refit(pairs, &rot, &translation, inlier_m).unwrap_or((yaw, translation));
         let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
         let pose = Isometry3::from_parts(Translation3::from(translation), rot);
         let distinct = |c: &Candidate| {
@@ -284,11 +227,11 @@ pub fn consensus(pairs: &[(Vec3, Vec3)], p: &GlobalParams) -> Vec<Candidate> {
             dt >= 1.0 || da >= 15.0
         };
         if out.iter().all(distinct) {
-            out.push(Candidate { pose, votes: votes(pairs, &rot, &translation, p.inlier_m) });
+            out.push(Candidate { pose, votes: votes(pairs, &rot, &translation, inlier_m) });
         }
     }
     out.sort_by_key(|c| std::cmp::Reverse(c.votes));
-    out.truncate(p.candidates);
+    out.truncate(c.global_candidates);
     out
 }
 
@@ -298,19 +241,8 @@ mod tests {
     use super::*;
     use crate::align::geometry::pose_xyz_yaw;
 
-    fn params() -> GlobalParams {
-        GlobalParams {
-            voxel_m: 0.3,
-            normal_radius_m: 0.75,
-            radius_m: 1.5,
-            min_curvature: 0.03,
-            source_keypoints: 800,
-            target_keypoints: 20_000,
-            matches_per_point: 2,
-            pair_samples: 20_000,
-            inlier_m: 0.4,
-            candidates: 8,
-        }
+    fn params() -> AlignConfig {
+        AlignConfig { global_candidates: 8, ..AlignConfig::default() }
     }
 
     /// An L-shaped set of rooms with a few boxes (furniture) on the floor: enough structure
@@ -372,10 +304,10 @@ mod tests {
             .filter(|q| (q.xy() - nalgebra::Vector2::new(3.0, 8.0)).norm() < 6.0)
             .map(|q| truth.inverse_transform_point(&nalgebra::Point3::from(*q)).coords)
             .collect();
-        let target = describe(&map, &p, p.target_keypoints);
-        let source = describe(&window, &p, p.source_keypoints);
+        let target = describe(&map, &p, p.global_target_keypoints);
+        let source = describe(&window, &p, p.global_source_keypoints);
         assert!(source.points.len() > 30 && target.points.len() > source.points.len());
-        let cands = consensus(&matches(&source, &target, p.matches_per_point), &p);
+        let cands = consensus(&matches(&source, &target, p.global_matches_per_point), &p);
         let (dt, da) = crate::align::geometry::pose_error(&cands[0].pose, &truth);
         assert!(dt < 0.3 && da < 3.0, "best candidate {dt:.2} m / {da:.1} deg off; {cands:?}");
     }

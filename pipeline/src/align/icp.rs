@@ -213,7 +213,7 @@ mod tests {
     /// A corridor along x: walls (normals ±y), floor and ceiling (normals ±z), fitting tightly;
     /// plus a share of misfit points whose nearest planes face along x, far off their residual.
     fn corridor(misfit_residual_m: f64) -> Vec<Pair> {
-        let mut rnd = crate::test_rng::uniform(7);
+        let mut rnd = crate::rng::uniform(7);
         let mut pairs = Vec::new();
         for i in 0..400 {
             let q = Vec3::new(rnd() * 20.0 - 10.0, rnd() * 2.0 - 1.0, rnd() * 2.5);

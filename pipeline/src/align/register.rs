@@ -4,8 +4,8 @@
 use super::config::AlignConfig;
 use super::coverage::{Coverage, Overlap};
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
-use super::geometry::{estimate_normals, pose_rows, Vec3, VoxelIndex};
-use super::global::{self, Described, GlobalParams};
+use super::geometry::{estimate_normals, pose_rows, thin, Vec3, VoxelIndex};
+use super::global::{self, Described};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
 use super::rejection::{AlignFailure, Rejection};
@@ -239,8 +239,7 @@ impl Aligner {
             });
         }
         let global_target = if config.global_candidates > 0 && config.reseed_yaw_step_deg > 0.0 {
-            let p = global_params(&config);
-            global::describe(target, &p, p.target_keypoints)
+            global::describe(target, &config, config.global_target_keypoints)
         } else {
             Described { points: Vec::new(), descriptors: Vec::new() }
         };
@@ -575,10 +574,9 @@ impl Aligner {
         if c.global_candidates == 0 || self.global_target.points.is_empty() {
             return Vec::new();
         }
-        let p = global_params(c);
-        let described = global::describe(source, &p, p.source_keypoints);
-        let pairs = global::matches(&described, &self.global_target, p.matches_per_point);
-        global::consensus(&pairs, &p)
+        let described = global::describe(source, c, c.global_source_keypoints);
+        let pairs = global::matches(&described, &self.global_target, c.global_matches_per_point);
+        global::consensus(&pairs, c)
             .into_iter()
             .map(|g| {
                 // Both clouds are level, so the candidate (a turn about the vertical) is used as
@@ -1037,29 +1035,4 @@ pub fn yaw_offsets_deg(step_deg: f64) -> Vec<f64> {
         (1..n).map(|k| f64::from(k) * step).map(|o| if o > 180.0 { o - 360.0 } else { o }).collect();
     offsets.sort_by(|a, b| a.abs().total_cmp(&b.abs()).then(b.total_cmp(a)));
     offsets
-}
-
-/// At most `max` points, taken evenly through `points` (the voxel order spreads them in space).
-fn thin(points: Vec<Vec3>, max: usize) -> Vec<Vec3> {
-    if points.len() <= max || max == 0 {
-        return points;
-    }
-    let step = points.len() as f64 / max as f64;
-    (0..max).filter_map(|i| points.get((i as f64 * step) as usize).copied()).collect()
-}
-
-/// The global stage's settings out of the aligner's.
-fn global_params(c: &AlignConfig) -> GlobalParams {
-    GlobalParams {
-        voxel_m: c.global_voxel_m,
-        normal_radius_m: c.global_normal_radius_m,
-        radius_m: c.global_radius_m,
-        min_curvature: c.global_min_curvature,
-        source_keypoints: c.global_source_keypoints,
-        target_keypoints: c.global_target_keypoints,
-        matches_per_point: c.global_matches_per_point,
-        pair_samples: c.global_pair_samples,
-        inlier_m: c.global_inlier_m,
-        candidates: c.global_candidates,
-    }
 }

@@ -89,7 +89,7 @@ fn a_source_capped_to_a_third_of_its_points_still_aligns() {
 fn nearest_matches_a_brute_force_search() {
     // A deterministic scatter over a few cells, queries inside and between them, on cell
     // boundaries and outside the cloud, with the search radius at and under the cell size.
-    let mut next = crate::test_rng::uniform(12345u64);
+    let mut next = crate::rng::uniform(12345u64);
     let points: Vec<Vec3> =
         (0..2000).map(|_| Vec3::new(next() * 3.0 - 1.5, next() * 3.0 - 1.5, next() * 1.0)).collect();
     let index = geometry::VoxelIndex::new(points.clone(), 0.5);

@@ -108,6 +108,8 @@ pub enum Refusal {
     LargeResidual,
     PoorFit,
     LargeCorrection,
+    /// The update came out non-finite (NaN or infinity in the state).
+    NonFinite,
 }
 
 impl Refusal {
@@ -117,6 +119,7 @@ impl Refusal {
             Self::LargeResidual => "large_residual",
             Self::PoorFit => "poor_fit",
             Self::LargeCorrection => "large_correction",
+            Self::NonFinite => "non_finite",
         }
     }
 }

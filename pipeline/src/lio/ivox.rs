@@ -115,7 +115,7 @@ mod tests {
 
     #[test]
     fn nearest_matches_a_brute_force_search_over_the_27_voxels() {
-        let mut next = crate::test_rng::uniform(99u64);
+        let mut next = crate::rng::uniform(99u64);
         let mut map = VoxelMap::new(0.5, 20, 0.0, 100.0);
         for _ in 0..3000 {
             map.insert(Vector3::new(next() * 3.0, next() * 3.0, next()));

@@ -374,7 +374,7 @@ impl Lio {
             };
             let v = self.monitor.judge(&self.cfg.health, scan.end_ns, &fit);
             // An update that came out non-finite is refused like any other bad scan.
-            let v = if self.state.is_finite() { v } else { Verdict { refused: Some(Refusal::LargeResidual), ..v } };
+            let v = if self.state.is_finite() { v } else { Verdict { refused: Some(Refusal::NonFinite), ..v } };
             if v.refused.is_some() {
                 self.state = prior;
                 self.cov = prior_cov;

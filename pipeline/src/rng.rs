@@ -1,4 +1,5 @@
-//! A seeded uniform generator for tests that scatter points (no dependency for it).
+//! A seeded uniform generator (no dependency for it): tests that scatter points, and the
+//! alignment's global stage, whose samples must repeat for a rerun to be byte-identical.
 
 /// Uniform numbers in [0, 1) from `seed` (a 64-bit LCG, top 53 bits): the same for a seed.
 pub fn uniform(seed: u64) -> impl FnMut() -> f64 {
