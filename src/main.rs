@@ -46,6 +46,8 @@ enum Command {
     Gen(cmd::gen::Args),
     /// Run the mission on a range of generated buildings; eval.json, a summary and plots.
     Eval(cmd::eval::Args),
+    /// The learned detector's training data from generated buildings (docs/pillars.md).
+    Dataset(cmd::dataset::Args),
     /// PTP (IEEE 1588): a grandmaster for the LiDAR network, a measure-only slave.
     #[command(subcommand)]
     Ptp(cmd::ptp::Command),
@@ -88,6 +90,7 @@ fn main() -> ExitCode {
         Command::Sim(a) => cmd::sim::run(a),
         Command::Gen(a) => cmd::gen::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Dataset(a) => cmd::dataset::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),
         Command::Base(c) => cmd::base::run(c),
         Command::Align(a) => cmd::align::run(a),

@@ -12,7 +12,8 @@ mod detect_sim;
 use starc_hil::sim::run::{run, SimOptions};
 use starc_hil::sim::scenario::Scenario;
 use starc_pipeline::detect::eval::MatchRule;
-use starc_pipeline::detect::{DetectConfig, GeometricDetector};
+use starc_pipeline::detect::pillars::PillarsDetector;
+use starc_pipeline::detect::{DetectConfig, DetectorKind, GeometricDetector};
 
 const ROOM: &str = r#"
 name = "detect test room"
@@ -74,17 +75,16 @@ waypoints = [[1.0, 4.0, 0]]
 waypoints = [[0.5, 0.5]]
 "#;
 
-#[test]
-fn detector_finds_people_in_every_pose_in_a_furnished_room() {
+/// The room, simulated and read back.
+fn room_run() -> detect_sim::SimRun {
     let scenario = Scenario::parse(ROOM, "inline").unwrap();
     let dir = tempfile::tempdir().unwrap();
     let opts = SimOptions { out: dir.path().to_path_buf(), duration_s: None, seed: 4, realtime: false, camera: false };
     run(&scenario, ROOM, &opts, &mut |_, _| {}).unwrap();
-    let sim = detect_sim::load(dir.path());
-    let cfg = DetectConfig::from_toml(include_str!("../config/detect.toml")).unwrap();
-    let mut det = GeometricDetector::new(cfg).unwrap();
-    let rule = MatchRule::default();
-    let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &rule);
+    detect_sim::load(dir.path())
+}
+
+fn report(ev: &detect_sim::Evaluation) {
     let c = ev.counts;
     let mut poses: Vec<String> = ev.per_pose.iter().map(|(k, (f, v))| format!("{k} {f}/{v}")).collect();
     poses.sort();
@@ -103,6 +103,17 @@ fn detector_finds_people_in_every_pose_in_a_furnished_room() {
     for (t, d) in &ev.false_positives {
         eprintln!("  FP at {t}: {:?} {:?} size {:?}", d.pose, d.centre_m, d.size_m);
     }
+}
+
+#[test]
+fn detector_finds_people_in_every_pose_in_a_furnished_room() {
+    let sim = room_run();
+    let cfg = DetectConfig::from_toml(include_str!("../config/detect.toml")).unwrap();
+    let mut det = GeometricDetector::new(cfg).unwrap();
+    let rule = MatchRule::default();
+    let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &rule);
+    report(&ev);
+    let c = ev.counts;
     assert!(ev.windows >= 20, "{} windows", ev.windows);
     // Every pose is seen in every window (the robot stands still facing them all).
     for pose in ["standing", "sitting", "crouching", "lying"] {
@@ -126,4 +137,23 @@ fn detector_finds_people_in_every_pose_in_a_furnished_room() {
     let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &rule);
     eprintln!("gates off: FP {}, precision {:.3}", ev.counts.false_positives, ev.counts.precision());
     assert!(ev.counts.precision() < 0.9, "gates off, precision {:.3}", ev.counts.precision());
+}
+
+/// The learned detector with the shipped weights, on the same room (a building it never saw in
+/// training: the generated development buildings are its data). It is weak (docs/detect.md):
+/// here it finds the lying person and misses the others, so the bounds guard what it does today
+/// (the lying person in nearly every window, few false positives, the points it hands on being
+/// the person's), not the goal.
+#[test]
+fn pointpillars_finds_the_lying_person_in_the_furnished_room() {
+    let sim = room_run();
+    let cfg = DetectConfig { kind: DetectorKind::Pointpillars, ..DetectConfig::default() };
+    let mut det = PillarsDetector::new(&cfg).unwrap();
+    let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &MatchRule::default());
+    report(&ev);
+    assert!(ev.windows >= 20, "{} windows", ev.windows);
+    let (found, visible) = ev.per_pose.get("lying").copied().unwrap_or_default();
+    assert!(found * 10 >= visible * 9 && visible * 10 >= ev.windows * 9, "lying found in {found} of {visible} windows");
+    assert!(ev.counts.precision() >= 0.5, "precision {:.3}", ev.counts.precision());
+    assert!(ev.purity() >= 0.8, "person points {:.3}", ev.purity());
 }

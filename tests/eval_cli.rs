@@ -80,3 +80,45 @@ fn eval_writes_rows_a_summary_and_plots() {
     let (ok, text) = starc(&["eval", "--seeds", "998..1001", "--offline", "--out", out.to_str().unwrap()]);
     assert!(!ok && text.contains("mixes development seeds"), "{text}");
 }
+
+/// `starc dataset` on a short run of one development building: the four arrays numpy reads, a
+/// box per person per window, and the test seeds refused without `--test-set`.
+#[test]
+fn dataset_writes_windows_and_boxes_and_keeps_test_seeds_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ds");
+    let (ok, text) = starc(&["dataset", "--seeds", "1000..1000", "--out", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("test set"), "{text}");
+    let (ok, text) =
+        starc(&["dataset", "--seeds", "2..2", "--max-duration", "8", "--out", out.to_str().unwrap(), "--jobs", "1"]);
+    assert!(ok, "{text}");
+    let building = out.join("warehouse-2");
+    let npy_shape = |name: &str| {
+        let bytes = std::fs::read(building.join(name)).unwrap();
+        assert_eq!(&bytes[..6], b"\x93NUMPY", "{name}");
+        let len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        let header = String::from_utf8(bytes[10..10 + len].to_vec()).unwrap();
+        let shape = header.split("'shape': (").nth(1).unwrap().split(')').next().unwrap().to_string();
+        let dims: Vec<usize> = shape.split(',').filter_map(|d| d.trim().parse().ok()).collect();
+        let item = if header.contains("'<i2'") || header.contains("'<u2'") {
+            2
+        } else if header.contains("'<i8'") {
+            8
+        } else {
+            4
+        };
+        assert_eq!(bytes.len() - 10 - len, dims.iter().product::<usize>() * item, "{name}: {header}");
+        dims
+    };
+    let points = npy_shape("points.npy");
+    let windows = npy_shape("windows.npy");
+    let boxes = npy_shape("boxes.npy");
+    assert_eq!(npy_shape("labels.npy"), vec![points[0]]);
+    assert!(windows[0] >= 5 && points[0] > windows[0] * 10_000, "{windows:?} windows, {points:?} points: {text}");
+    // Every window lists every person in the building (seen or not).
+    assert_eq!(boxes[1], 10);
+    assert_eq!(boxes[0] % windows[0], 0, "{boxes:?} boxes over {windows:?} windows");
+    let meta = std::fs::read_to_string(building.join("meta.json")).unwrap();
+    assert!(meta.contains("\"set\": \"development\""), "{meta}");
+    assert!(!out.join("sim").join("warehouse-2").exists(), "the simulator's run is removed");
+}

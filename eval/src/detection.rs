@@ -48,6 +48,7 @@ mod tests {
     fn a_person_is_visible_by_the_returns_on_them_not_by_what_lies_in_their_box() {
         let person = PersonBox {
             t_ns: 0,
+            pose: crate::truth::TruePose::Standing,
             label: 1,
             centre_m: Vector3::new(2.0, 0.0, 0.9),
             size_m: Vector3::new(0.4, 0.5, 1.8),

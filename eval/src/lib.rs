@@ -23,7 +23,9 @@
 //! # Ok(()) }
 //! ```
 
+pub mod ap;
 pub mod batch;
+pub mod dataset;
 pub mod detection;
 pub mod drift;
 pub mod error;
@@ -45,4 +47,4 @@ pub use report::{
 };
 pub use score::Scorer;
 pub use summary::summary;
-pub use truth::{CameraFrame, CameraMount, Mask, PersonBox, PersonReturns, Trajectory, Truth};
+pub use truth::{CameraFrame, CameraMount, Mask, PersonBox, PersonReturns, Trajectory, TruePose, Truth};

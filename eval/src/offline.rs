@@ -46,6 +46,9 @@ pub struct Offline {
     /// Compute times measured on the wall clock; off, every time reads 0 and the outputs of
     /// a run depend on its inputs alone (a rerun is byte-identical).
     pub wall_timing: bool,
+    /// Run the rig's alignment (off: the robot's figures alone, detection and odometry, in a
+    /// fraction of the time; the rig is never aligned).
+    pub align: bool,
 }
 
 impl Offline {
@@ -64,6 +67,7 @@ impl Offline {
             robot: RobotCoreConfig::default(),
             truth: Some(truth),
             wall_timing,
+            align: true,
         }
     }
 }
@@ -99,7 +103,7 @@ pub fn run<E: std::fmt::Display>(
         for ev in events.drain(..) {
             state.take(ev);
         }
-        if let Some(ev) = state.mission.align() {
+        if let Some(ev) = state.cfg.align.then(|| state.mission.align()).flatten() {
             state.take(ev);
         }
         state.frames()?;

@@ -72,6 +72,27 @@ pub struct DetectionReport {
     pub false_positives: usize,
     pub misses: usize,
     pub windows: usize,
+    /// Recall per true posture (standing, sitting, crouching, lying): visible people, and how
+    /// many of them were found.
+    pub per_true_pose: std::collections::BTreeMap<&'static str, PoseRecall>,
+    /// Precision per detected posture (upright, low, lying): true and false positives.
+    pub per_detected_pose: std::collections::BTreeMap<&'static str, PosePrecision>,
+    /// Average precision per posture class, bird's-eye view (see [`crate::ap`]).
+    pub average_precision: std::collections::BTreeMap<&'static str, crate::ap::ClassAp>,
+}
+
+#[derive(Debug, Default, Serialize, Clone, Copy)]
+pub struct PoseRecall {
+    pub visible: usize,
+    pub found: usize,
+    pub recall: f64,
+}
+
+#[derive(Debug, Default, Serialize, Clone, Copy)]
+pub struct PosePrecision {
+    pub true_positives: usize,
+    pub false_positives: usize,
+    pub precision: f64,
 }
 
 #[derive(Debug, Serialize)]

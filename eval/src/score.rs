@@ -8,6 +8,7 @@
 //! Events come in as the run makes them: [`Scorer::robot_pose`], [`Scorer::detection`],
 //! [`Scorer::rig_started`], [`Scorer::alignment`], [`Scorer::frame`]; all times are PTP ns.
 
+use crate::ap::ApTally;
 use crate::detection::{box_returns, truth_in_world};
 use crate::drift::{drift_stretches, DriftReport, ScoredPose};
 use crate::error::{write, EvalError, Result};
@@ -15,17 +16,18 @@ use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
 use crate::plots::write_plots;
 use crate::quantiles::quantiles;
 use crate::report::{
-    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MemoryReport, PoseErrorReport, Report,
-    RobotPoseErrorReport,
+    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MemoryReport, PoseErrorReport, PosePrecision,
+    PoseRecall, Report, RobotPoseErrorReport,
 };
-use crate::truth::{at, people_at, CameraFrame, Truth};
+use crate::truth::{at, people_at, CameraFrame, PersonBox, TruePose, Truth};
 use nalgebra::Isometry3;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
-use starc_pipeline::detect::eval::{match_window, Counts, MatchRule};
+use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson, WindowMatch};
+use starc_pipeline::detect::PersonPose;
 use starc_pipeline::lio::Health;
 use starc_pipeline::mission::{RobotDetection, View};
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
 
 /// A drift stretch: the robot's pose error growing by more than this within this long (the
@@ -48,6 +50,10 @@ pub struct Scorer {
     pub lio_t_world: Option<Isometry3<f64>>,
     counts: Counts,
     windows: usize,
+    /// Per true posture: (visible, found); per detected posture: (true, false positives).
+    per_true_pose: BTreeMap<&'static str, (usize, usize)>,
+    per_detected_pose: BTreeMap<&'static str, (usize, usize)>,
+    ap: ApTally,
     rig_first_ns: Option<u64>,
     attempts: usize,
     accepted: usize,
@@ -83,6 +89,9 @@ impl Scorer {
             lio_t_world: None,
             counts: Counts::default(),
             windows: 0,
+            per_true_pose: BTreeMap::new(),
+            per_detected_pose: BTreeMap::new(),
+            ap: ApTally::default(),
             rig_first_ns: None,
             attempts: 0,
             accepted: 0,
@@ -146,14 +155,14 @@ impl Scorer {
     /// One detection window of the robot, matched against the true people.
     pub fn detection(&mut self, d: &RobotDetection) {
         let Some(l_t_w) = self.lio_t_world else { return };
-        let truth_people = truth_in_world(
-            &people_at(&self.truth.people, d.stamp_ns),
-            &l_t_w,
-            &d.points,
-            self.truth.robot_returns.as_ref(),
-        );
+        let boxes = people_at(&self.truth.people, d.stamp_ns);
+        let truth_people = truth_in_world(&boxes, &l_t_w, &d.points, self.truth.robot_returns.as_ref());
         let rule = MatchRule::default();
         let m = match_window(&d.found, &truth_people, &rule);
+        self.tally_poses(d, &boxes, &truth_people, &m, &rule);
+        let posed: Vec<(TruthPerson, TruePose)> =
+            truth_people.iter().cloned().zip(boxes.iter().map(|b| b.pose)).collect();
+        self.ap.window(&d.found, &posed, rule.min_returns);
         for label in m.detection_label.iter().flatten() {
             self.detected.record(*label, d.stamp_ns);
         }
@@ -190,6 +199,32 @@ impl Scorer {
         }
         self.counts.add(&m.counts);
         self.windows += 1;
+    }
+
+    /// Recall per true posture and precision per detected posture, for one window.
+    fn tally_poses(
+        &mut self,
+        d: &RobotDetection,
+        boxes: &[PersonBox],
+        people: &[TruthPerson],
+        m: &WindowMatch,
+        rule: &MatchRule,
+    ) {
+        for (b, t) in boxes.iter().zip(people).filter(|(_, t)| t.returns >= rule.min_returns) {
+            let e = self.per_true_pose.entry(b.pose.name()).or_default();
+            e.0 += 1;
+            e.1 += usize::from(!m.missed.contains(&t.label));
+        }
+        for (det, label) in d.found.iter().zip(&m.detection_label) {
+            let visible =
+                label.and_then(|l| people.iter().find(|t| t.label == l)).map(|t| t.returns >= rule.min_returns);
+            let e = self.per_detected_pose.entry(pose_name(det.pose)).or_default();
+            match visible {
+                Some(true) => e.0 += 1,
+                Some(false) => {}
+                None => e.1 += 1,
+            }
+        }
     }
 
     /// An alignment attempt that ran: `accepted` when the rig took it.
@@ -329,6 +364,22 @@ impl Scorer {
                 false_positives: self.counts.false_positives,
                 misses: self.counts.misses,
                 windows: self.windows,
+                per_true_pose: self
+                    .per_true_pose
+                    .iter()
+                    .map(|(&k, &(visible, found))| {
+                        (k, PoseRecall { visible, found, recall: found as f64 / visible.max(1) as f64 })
+                    })
+                    .collect(),
+                per_detected_pose: self
+                    .per_detected_pose
+                    .iter()
+                    .map(|(&k, &(tp, fp))| {
+                        let precision = if tp + fp == 0 { 1.0 } else { tp as f64 / (tp + fp) as f64 };
+                        (k, PosePrecision { true_positives: tp, false_positives: fp, precision })
+                    })
+                    .collect(),
+                average_precision: self.ap.report(),
             },
             alignment: AlignmentReport {
                 first_accepted_after_s: self.first_accept.map(|(dt, _, _)| dt as f64 * 1e-9),
@@ -366,6 +417,14 @@ fn rmse(v: &[f64]) -> f64 {
         f64::NAN
     } else {
         (sum / n as f64).sqrt()
+    }
+}
+
+fn pose_name(p: PersonPose) -> &'static str {
+    match p {
+        PersonPose::Upright => "upright",
+        PersonPose::Low => "low",
+        PersonPose::Lying => "lying",
     }
 }
 

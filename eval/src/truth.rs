@@ -34,10 +34,42 @@ pub fn at(traj: &[(u64, Isometry3<f64>)], t: u64) -> Isometry3<f64> {
     pose_at(traj, t).unwrap_or_else(Isometry3::identity)
 }
 
+/// A true person's posture (people.csv's `pose`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum TruePose {
+    Standing,
+    Sitting,
+    Crouching,
+    Lying,
+}
+
+impl TruePose {
+    pub const ALL: [TruePose; 4] = [TruePose::Standing, TruePose::Sitting, TruePose::Crouching, TruePose::Lying];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TruePose::Standing => "standing",
+            TruePose::Sitting => "sitting",
+            TruePose::Crouching => "crouching",
+            TruePose::Lying => "lying",
+        }
+    }
+
+    /// The class index of the learned detector's head (docs/pillars.md).
+    pub fn class_index(self) -> usize {
+        self as usize
+    }
+
+    fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == s)
+    }
+}
+
 /// One person's box at one time (people.csv).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PersonBox {
     pub t_ns: u64,
+    pub pose: TruePose,
     pub label: u16,
     pub centre_m: Vector3<f64>,
     pub size_m: Vector3<f64>,
@@ -52,9 +84,10 @@ pub fn read_people(path: &Path) -> Result<Vec<PersonBox>> {
     for (n, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let num = |i: usize| f.get(i).and_then(|s| s.parse::<f64>().ok());
-        let (Some(t), Some(label), Some(cx), Some(cy), Some(cz), Some(l), Some(w), Some(h), Some(yaw)) = (
+        let (Some(t), Some(label), Some(pose), Some(cx), Some(cy), Some(cz), Some(l), Some(w), Some(h), Some(yaw)) = (
             f.first().and_then(|s| parse_ns(s)),
             f.get(1).and_then(|s| s.parse::<u16>().ok()),
+            f.get(3).and_then(|s| TruePose::parse(s)),
             num(4),
             num(5),
             num(6),
@@ -63,10 +96,15 @@ pub fn read_people(path: &Path) -> Result<Vec<PersonBox>> {
             num(9),
             num(10),
         ) else {
-            return Err(bad_line(path, n, "time_s,label,name,pose,centre xyz,length,width,height,yaw"));
+            return Err(bad_line(
+                path,
+                n,
+                "time_s,label,name,pose (standing|sitting|crouching|lying),centre xyz,length,width,height,yaw",
+            ));
         };
         out.push(PersonBox {
             t_ns: t,
+            pose,
             label,
             centre_m: Vector3::new(cx, cy, cz),
             size_m: Vector3::new(l, w, h),

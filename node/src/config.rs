@@ -24,6 +24,10 @@ pub struct RobotNodeConfig {
     /// A LIO config file (config/lio.toml); none: the defaults (internal IMU).
     #[serde(default)]
     pub lio: Option<PathBuf>,
+    /// The person detector (`[detect]`: `kind = "geometric" | "pointpillars"` and any field of
+    /// config/detect.toml); none: the defaults.
+    #[serde(default)]
+    pub detect: starc_pipeline::detect::DetectConfig,
     /// Changed map tiles go to the rig this often.
     #[serde(default = "default_map_period_ms")]
     pub map_period_ms: u64,
@@ -179,12 +183,14 @@ impl RobotNodeConfig {
         let mut cfg: Self = load(path)?;
         cfg.resolve_paths(path);
         check_link(&cfg.link, path)?;
+        cfg.detect.validate().map_err(|e| NodeError::Config(format!("{}: [detect] {e}", path.display())))?;
         Ok(cfg)
     }
 
     /// Relative paths in the file are relative to the file.
     pub fn resolve_paths(&mut self, config: &Path) {
         rel(config, &mut self.lio);
+        rel(config, &mut self.detect.pillars.model);
         rel(config, &mut self.record);
         rel_link(config, &mut self.link);
     }

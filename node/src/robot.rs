@@ -61,7 +61,7 @@ pub async fn run(
         Some(path) => lio_config(Some(path))?,
         None => RobotCoreConfig::robot_lio(),
     };
-    let core_cfg = RobotCoreConfig { lio, ..RobotCoreConfig::default() };
+    let core_cfg = RobotCoreConfig { lio, detect: cfg.detect.clone(), ..RobotCoreConfig::default() };
     // The link carries no coverage yet, so the node does not walk rays for it.
     let map = RobotMap::new(RobotMapConfig { coverage_ray_stride: 0, ..core_cfg.map_config() })?;
     let mut core = RobotCore::new(core_cfg)?;

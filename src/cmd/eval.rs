@@ -66,6 +66,12 @@ pub struct Args {
     /// building's: the responder may not have arrived).
     #[arg(long)]
     max_duration: Option<f64>,
+    #[command(flatten)]
+    detector: super::detector_arg::DetectorArgs,
+    /// Offline: leave out the rig's alignment, for the robot's figures alone (detection and
+    /// odometry) in a fraction of the time.
+    #[arg(long)]
+    no_align: bool,
 }
 
 /// An inclusive range of seeds.
@@ -102,6 +108,8 @@ struct EvalFile<'a> {
     seeds: [u64; 2],
     max_duration_s: Option<f64>,
     walker_min_height_m: f64,
+    detector: starc_pipeline::detect::DetectorKind,
+    aligned: bool,
     test_set: bool,
     family: String,
     mode: &'static str,
@@ -116,6 +124,9 @@ struct EvalFile<'a> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let SeedRange { first, last } = args.seeds;
+    if args.no_align && !args.offline {
+        bail!("--no-align is for offline runs");
+    }
     if args.walker_min_height_m.is_some() && !args.offline {
         bail!("--walker-min-height-m is for offline runs (the live robot node takes its core's defaults)");
     }
@@ -130,7 +141,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let file = EvalFile {
         seeds: [first, last],
         max_duration_s: args.max_duration,
-        walker_min_height_m: robot_config(&args).walker_min_height_m,
+        walker_min_height_m: robot_config(&args)?.walker_min_height_m,
+        detector: robot_config(&args)?.detect.kind,
+        aligned: !args.no_align,
         test_set: gen::is_test_seed(first) && args.hint == Hint::None && args.max_duration.is_none(),
         family: args.family.0.map_or_else(|| "any".to_string(), |f| f.to_string()),
         mode: if args.offline { "offline" } else { "live" },
@@ -258,20 +271,21 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             start,
             start_gate_m,
             coverage: !args.no_coverage,
-            robot: robot_config(args),
+            robot: robot_config(args)?,
             truth: Some(truth),
             wall_timing: true,
+            align: !args.no_align,
         },
     )?;
     Ok(())
 }
 
-fn robot_config(args: &Args) -> RobotCoreConfig {
-    let mut cfg = RobotCoreConfig::default();
+fn robot_config(args: &Args) -> anyhow::Result<RobotCoreConfig> {
+    let mut cfg = RobotCoreConfig { detect: args.detector.config()?, ..RobotCoreConfig::default() };
     if let Some(h) = args.walker_min_height_m {
         cfg.walker_min_height_m = h;
     }
-    cfg
+    Ok(cfg)
 }
 
 fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
@@ -284,6 +298,7 @@ fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
         },
         start_gate_m: 2.0,
         view: starc_view::ViewConfig::default(),
+        detect: args.detector.config()?,
     };
     super::sim_live::run(dir, &opts)
 }

@@ -53,6 +53,8 @@ pub struct Args {
     /// Leave the base's wheel odometry (the run's robot_can.log) out of the robot's LIO.
     #[arg(long)]
     pub no_wheels: bool,
+    #[command(flatten)]
+    pub detector: super::detector_arg::DetectorArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -74,10 +76,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coverage: !args.no_coverage,
         robot: RobotCoreConfig {
             walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),
+            detect: args.detector.config()?,
             ..RobotCoreConfig::default()
         },
         truth: Some(truth),
         wall_timing: true,
+        align: true,
     };
     print!("{}", offline::run(inputs, run)?);
     Ok(())

@@ -2,7 +2,9 @@
 
 pub mod align;
 pub mod base;
+pub mod dataset;
 pub mod demo;
+pub mod detector_arg;
 pub mod devices;
 pub mod eval;
 pub mod export;

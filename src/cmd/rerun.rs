@@ -82,5 +82,6 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
         robot: RobotCoreConfig::default(),
         truth: None,
         wall_timing: !args.no_wall_timing,
+        align: true,
     })
 }

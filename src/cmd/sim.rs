@@ -47,6 +47,8 @@ pub struct Args {
     /// Write every Nth camera frame's AR view as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     frames_every: u64,
+    #[command(flatten)]
+    detector: super::detector_arg::DetectorArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -132,6 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             no_coverage: false,
             walker_min_height_m: None,
             no_wheels: false,
+            detector: args.detector.clone(),
         })?;
     } else if !args.sensors_only && !args.no_camera {
         let opts = super::sim_live::LiveOptions {
@@ -140,6 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint: Some((1.0, 20.0)),
             start_gate_m: 2.0,
             view: starc_view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
+            detect: args.detector.config()?,
         };
         super::sim_live::run(&args.out, &opts)?;
     }

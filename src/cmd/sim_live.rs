@@ -46,6 +46,8 @@ pub struct LiveOptions {
     pub start_gate_m: f64,
     /// The rig node's live views (browser, Foxglove) while the mission runs.
     pub view: starc_view::ViewConfig,
+    /// The robot node's person detector.
+    pub detect: starc_pipeline::detect::DetectConfig,
 }
 
 /// Free loopback ports for the nodes: each socket is held until every port is chosen, so that
@@ -127,6 +129,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         livox: driver(&mut ports, robot_bcast)?,
         lidar_ip: Some(ROBOT_MOCK),
         lio: None,
+        detect: opts.detect.clone(),
         map_period_ms: 1000,
         record: Some(opts.out.join("robot.mcap")),
         link: link(Some(link_port), None)?,
@@ -407,6 +410,7 @@ mod tests {
             start_hint,
             start_gate_m: 2.0,
             view: Default::default(),
+            detect: Default::default(),
         }
     }
 

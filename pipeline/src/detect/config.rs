@@ -98,6 +98,51 @@ pub struct DetectConfig {
     /// nearer (what hides them). 0 turns it off.
     pub behind_height_m: [f64; 2],
     pub behind_min_edge_share: f64,
+    /// Which detector runs: `geometric` (the rules above) or `pointpillars` (the learned one,
+    /// set in `[pillars]`; it uses the floor settings above).
+    pub kind: DetectorKind,
+    pub pillars: PillarsConfig,
+}
+
+/// The detector a robot runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DetectorKind {
+    #[default]
+    Geometric,
+    Pointpillars,
+}
+
+impl std::str::FromStr for DetectorKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "geometric" => Ok(Self::Geometric),
+            "pointpillars" => Ok(Self::Pointpillars),
+            _ => Err(format!("{s:?}: want geometric or pointpillars")),
+        }
+    }
+}
+
+/// Settings of the learned detector ([`crate::detect::pillars::PillarsDetector`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PillarsConfig {
+    /// A weights file (STPW, docs/pillars.md); none: the weights built into the program
+    /// (config/models/pillars.stpw when it was built).
+    pub model: Option<std::path::PathBuf>,
+    /// A heatmap peak needs at least this score to be a person.
+    pub min_score: f64,
+    /// Boxes overlapping a better one by more than this (bird's-eye IoU) are dropped.
+    pub nms_iou: f64,
+    /// The LiDAR's height above the floor, for a window that shows no floor.
+    pub sensor_height_m: f64,
+}
+
+impl Default for PillarsConfig {
+    fn default() -> Self {
+        Self { model: None, min_score: 0.3, nms_iou: 0.1, sensor_height_m: 0.45 }
+    }
 }
 
 impl Default for DetectConfig {
@@ -139,6 +184,8 @@ impl Default for DetectConfig {
             follow_lying_min_length_m: 0.5,
             behind_height_m: [0.45, 1.2],
             behind_min_edge_share: 0.75,
+            kind: DetectorKind::Geometric,
+            pillars: PillarsConfig::default(),
         }
     }
 }
@@ -215,6 +262,13 @@ impl DetectConfig {
         }
         if !self.max_bottom_m.is_finite() {
             return Err(bad("max_bottom_m must be finite"));
+        }
+        let p = &self.pillars;
+        if !((0.0..=1.0).contains(&p.min_score) && (0.0..=1.0).contains(&p.nms_iou)) {
+            return Err(bad("pillars.min_score and pillars.nms_iou must be in [0, 1]"));
+        }
+        if !(p.sensor_height_m.is_finite() && (0.0..=3.0).contains(&p.sensor_height_m)) {
+            return Err(bad("pillars.sensor_height_m must be between 0 and 3"));
         }
         Ok(())
     }

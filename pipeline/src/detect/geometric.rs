@@ -85,6 +85,10 @@ impl Detector for GeometricDetector {
         "geometric"
     }
 
+    fn last_floor(&self) -> Option<FloorModel> {
+        self.last_floor
+    }
+
     fn detect(&mut self, window: &DetectWindow<'_>, out: &mut Vec<Detection>) {
         self.last_clusters.clear();
         self.last_cluster_points.clear();

@@ -32,8 +32,9 @@ mod follow;
 mod fov;
 mod geometric;
 mod occlusion;
+pub mod pillars;
 
-pub use config::DetectConfig;
+pub use config::{DetectConfig, DetectorKind, PillarsConfig};
 pub use features::ClusterFeatures;
 pub use floor::{estimate_floor, FloorModel};
 pub use geometric::GeometricDetector;
@@ -126,6 +127,18 @@ pub trait Detector {
     fn name(&self) -> &'static str;
     /// Appends the people found in `window` to `out` (cleared by the caller, not here).
     fn detect(&mut self, window: &DetectWindow<'_>, out: &mut Vec<Detection>);
+    /// The floor the last window was judged against, if the detector estimated one.
+    fn last_floor(&self) -> Option<FloorModel> {
+        None
+    }
+}
+
+/// The detector `cfg.kind` names.
+pub fn make_detector(cfg: &DetectConfig) -> Result<Box<dyn Detector + Send>, crate::PipelineError> {
+    Ok(match cfg.kind {
+        DetectorKind::Geometric => Box::new(GeometricDetector::new(cfg.clone())?),
+        DetectorKind::Pointpillars => Box::new(pillars::PillarsDetector::new(cfg)?),
+    })
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@ use super::robot_map::{MapScan, RobotMap, RobotMapConfig};
 use crate::align::Coverage;
 use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{
-    DetectConfig, DetectWindow, Detection, Detector, FloorModel, GeometricDetector, PersonPose, WindowPoint,
+    make_detector, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose, WindowPoint,
 };
 use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, WheelFusion, WheelSample};
 use crate::timing::Stopwatch;
@@ -140,7 +140,7 @@ pub struct RobotCore {
     cfg: RobotCoreConfig,
     lio: Lio,
     placer: ScanPlacer,
-    detector: GeometricDetector,
+    detector: Box<dyn Detector + Send>,
     window: VecDeque<Arc<Vec<WindowPoint>>>,
     /// Placed scans not yet in the map (shared with the window): they go in when the map is
     /// next asked for, so that growing the map never delays a detection (or a node takes them
@@ -161,7 +161,7 @@ impl RobotCore {
         }
         Ok(Self {
             lio: Lio::new(cfg.lio.clone()),
-            detector: GeometricDetector::new(cfg.detect.clone())?,
+            detector: make_detector(&cfg.detect)?,
             placer: ScanPlacer::default(),
             window: VecDeque::new(),
             unmapped: Vec::new(),
