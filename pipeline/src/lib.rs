@@ -21,7 +21,7 @@ pub mod lio;
 pub mod mission;
 pub mod pose;
 pub mod record;
-pub(crate) mod rng;
+pub mod rng;
 pub mod timing;
 pub mod voxel_hash;
 

@@ -3,13 +3,8 @@
 /// A room seen from its middle: floor, two walls, a table top, a standing and a lying person,
 /// and scattered clutter, in the model frame (deterministic).
 pub fn room() -> Vec<[f32; 3]> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut uniform = starc_pipeline::rng::uniform(7);
+    let mut next = move || uniform() as f32;
     let mut pts = Vec::new();
     for _ in 0..20_000 {
         pts.push([next() * 9.0, next() * 10.0 - 5.0, 0.01 * (next() - 0.5)]);

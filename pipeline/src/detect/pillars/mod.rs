@@ -7,6 +7,7 @@ mod detector;
 mod frame;
 pub mod grid;
 pub mod net;
+pub mod npy;
 pub mod weights;
 
 pub use detector::{PillarsDetector, PillarsTimes};
