@@ -8,6 +8,7 @@ use crate::error::write;
 use crate::truth::{at, people_at, read_people, read_tum, PersonBox, PersonReturns, Trajectory};
 use crate::{EvalError, Result};
 use nalgebra::Isometry3;
+use starc_pipeline::detect::eval::{MatchRule, TruthPerson};
 use starc_pipeline::detect::pillars::npy::{le_bytes, npy};
 use starc_pipeline::detect::pillars::ModelFrame;
 use starc_pipeline::detect::{DetectConfig, DetectWindow, WindowPoint};
@@ -65,7 +66,7 @@ pub struct Exported {
     pub windows: usize,
     pub points: usize,
     pub boxes: usize,
-    /// Boxes with at least 30 returns (those the evaluation demands).
+    /// Boxes with enough returns for the evaluation to demand them (`MatchRule::min_returns`).
     pub visible_boxes: usize,
 }
 
@@ -148,7 +149,7 @@ fn add_window(
         let class = truth_box.pose.class_index() as f64;
         let row = [f64::from(index), x, y, z, s.x, s.y, s.z, yaw, class, person.returns as f64];
         arrays.boxes.extend(row.map(|v| v as f32));
-        arrays.visible += usize::from(person.returns >= 30);
+        arrays.visible += usize::from(person.returns >= MatchRule::default().min_returns);
     }
 }
 
@@ -157,7 +158,7 @@ fn kept(m: [f32; 3]) -> bool {
 }
 
 /// The label of the person whose box holds the point (above the floor), else 0.
-fn person_label(p: &WindowPoint, people: &[starc_pipeline::detect::eval::TruthPerson], frame: &ModelFrame) -> u16 {
+fn person_label(p: &WindowPoint, people: &[TruthPerson], frame: &ModelFrame) -> u16 {
     let xyz = p.xyz();
     if frame.floor().height(xyz.x, xyz.y, xyz.z) < PERSON_MIN_HEIGHT_M {
         return 0;

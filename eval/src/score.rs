@@ -8,7 +8,7 @@
 //! Events come in as the run makes them: [`Scorer::robot_pose`], [`Scorer::detection`],
 //! [`Scorer::rig_started`], [`Scorer::alignment`], [`Scorer::frame`]; all times are PTP ns.
 
-use crate::ap::ApTally;
+use crate::ap::{class_of_pose, ApTally};
 use crate::detection::{box_returns, truth_in_world};
 use crate::drift::{drift_stretches, DriftReport, ScoredPose};
 use crate::error::{write, EvalError, Result};
@@ -24,7 +24,6 @@ use nalgebra::Isometry3;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson, WindowMatch};
-use starc_pipeline::detect::PersonPose;
 use starc_pipeline::lio::Health;
 use starc_pipeline::mission::{RobotDetection, View};
 use std::collections::{BTreeMap, VecDeque};
@@ -218,7 +217,7 @@ impl Scorer {
         for (det, label) in d.found.iter().zip(&m.detection_label) {
             let visible =
                 label.and_then(|l| people.iter().find(|t| t.label == l)).map(|t| t.returns >= rule.min_returns);
-            let e = self.per_detected_pose.entry(pose_name(det.pose)).or_default();
+            let e = self.per_detected_pose.entry(class_of_pose(det.pose)).or_default();
             match visible {
                 Some(true) => e.0 += 1,
                 Some(false) => {}
@@ -417,14 +416,6 @@ fn rmse(v: &[f64]) -> f64 {
         f64::NAN
     } else {
         (sum / n as f64).sqrt()
-    }
-}
-
-fn pose_name(p: PersonPose) -> &'static str {
-    match p {
-        PersonPose::Upright => "upright",
-        PersonPose::Low => "low",
-        PersonPose::Lying => "lying",
     }
 }
 

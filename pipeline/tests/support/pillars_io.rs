@@ -24,7 +24,7 @@ pub fn write_inputs(dir: &Path, pillars: &Pillars) {
         .collect();
     let coords: Vec<i64> = pillars.coords.iter().flat_map(|&(iy, ix)| [i64::from(iy), i64::from(ix)]).collect();
     let write = |name: &str, bytes: Vec<u8>| std::fs::write(dir.join(name), bytes).unwrap_or_else(|e| panic!("{e}"));
-    write("features.npy", npy("<f4", &[p, MAX_POINTS, POINT_FEATURES], &le_bytes(&pillars.features, f32::to_le_bytes)));
+    write("features.npy", npy("<f4", &[p, MAX_POINTS, POINT_FEATURES], &le_bytes(&pillars.padded(), f32::to_le_bytes)));
     write("mask.npy", npy("<f4", &[p, MAX_POINTS], &le_bytes(&mask, f32::to_le_bytes)));
     write("coords.npy", npy("<i8", &[p, 2], &le_bytes(&coords, i64::to_le_bytes)));
 }

@@ -21,7 +21,8 @@ pub const GRID_TENSOR: [f32; 8] =
 pub struct Pillars {
     /// (row `iy`, column `ix`) of each pillar.
     pub coords: Vec<(u16, u16)>,
-    /// `[pillar][point][feature]`, zero past a pillar's kept points.
+    /// The kept points' 8 features, pillar after pillar, `counts[p]` rows each (no padding: the
+    /// pillar net takes only real points).
     pub features: Vec<f32>,
     /// Kept points per pillar (1..=32).
     pub counts: Vec<u8>,
@@ -36,11 +37,18 @@ impl Pillars {
         self.coords.is_empty()
     }
 
-    /// The kept points' features of pillar `p`, `counts[p]` rows of 8.
-    pub fn points(&self, p: usize) -> &[f32] {
-        let start = p * MAX_POINTS * POINT_FEATURES;
-        let n = self.counts.get(p).map_or(0, |&c| usize::from(c));
-        self.features.get(start..start + n * POINT_FEATURES).unwrap_or(&[])
+    /// The features as the ONNX graph takes them: `[pillar][point][feature]`, zero past a
+    /// pillar's kept points (the reference check; inference never pads).
+    pub fn padded(&self) -> Vec<f32> {
+        let mut out = vec![0.0; self.len() * MAX_POINTS * POINT_FEATURES];
+        let mut rows = self.features.chunks_exact(POINT_FEATURES);
+        for (p, &n) in self.counts.iter().enumerate() {
+            for (i, row) in rows.by_ref().take(usize::from(n)).enumerate() {
+                let at = (p * MAX_POINTS + i) * POINT_FEATURES;
+                out[at..at + POINT_FEATURES].copy_from_slice(row);
+            }
+        }
+        out
     }
 }
 
@@ -98,7 +106,7 @@ pub fn pillarize(points: &[[f32; 3]]) -> Pillars {
     out
 }
 
-/// The 8 features of each kept point of one pillar, padded with zeros to 32 points.
+/// The 8 features of each kept point of one pillar.
 fn push_features(out: &mut Vec<f32>, pts: &[[f32; 3]], ix: usize, iy: usize) {
     let n = pts.len() as f32;
     let mean = |k: usize| pts.iter().map(|p| p[k]).sum::<f32>() / n;
@@ -108,7 +116,6 @@ fn push_features(out: &mut Vec<f32>, pts: &[[f32; 3]], ix: usize, iy: usize) {
     for p in pts {
         out.extend([p[0], p[1], p[2], p[0] - mx, p[1] - my, p[2] - mz, p[0] - cx, p[1] - cy]);
     }
-    out.extend(std::iter::repeat_n(0.0, (MAX_POINTS - pts.len()) * POINT_FEATURES));
 }
 
 #[cfg(test)]
@@ -122,12 +129,13 @@ mod tests {
         // y 0.05 and 0.15 are rows 48 and 48; x 1.05 is column 5, 0.05 column 0.
         assert_eq!(p.coords, vec![(48, 0), (48, 5)]);
         assert_eq!(p.counts, vec![1, 2]);
-        let second = p.points(1);
+        let padded = p.padded();
+        let second = &padded[MAX_POINTS * POINT_FEATURES..][..16];
         assert_eq!(second.len(), 16);
         // x, y, z; offsets from the mean (1.075, 0.075, 1.1); offsets from the centre (1.1, -9.6 + 48.5 * 0.2).
         assert!((second[3] + 0.025).abs() < 1e-6 && (second[5] + 0.1).abs() < 1e-6);
         assert!((second[6] + 0.05).abs() < 1e-5 && (second[7] - (0.05 - (-9.6 + 48.5 * 0.2))).abs() < 1e-5);
-        assert_eq!(p.features.len(), 2 * MAX_POINTS * POINT_FEATURES);
+        assert_eq!(p.padded().len(), 2 * MAX_POINTS * POINT_FEATURES);
     }
 
     #[test]
@@ -136,6 +144,7 @@ mod tests {
         let p = pillarize(&pts);
         assert_eq!(p.counts, vec![32]);
         // Every second point: the last kept is point 62.
-        assert!((p.points(0)[2] - 0.0).abs() < 1e-6 && (p.points(0)[31 * 8 + 2] - 0.62).abs() < 1e-6);
+        let first = p.padded();
+        assert!((first[2] - 0.0).abs() < 1e-6 && (first[31 * 8 + 2] - 0.62).abs() < 1e-6);
     }
 }

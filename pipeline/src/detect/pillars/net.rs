@@ -205,24 +205,18 @@ impl Net {
 
     /// The pillar feature net: per pillar, the max over its kept points of ReLU(W x + b).
     pub fn pillar_features(&self, pillars: &Pillars) -> Vec<f32> {
-        // Only the kept points go through the product: the padding would be most of it.
-        let counts: Vec<usize> = (0..pillars.len()).map(|p| pillars.points(p).len() / POINT_FEATURES).collect();
-        let mut kept = Vec::with_capacity(counts.iter().sum::<usize>() * POINT_FEATURES);
-        for p in 0..pillars.len() {
-            kept.extend_from_slice(pillars.points(p));
-        }
-        let rows = kept.len() / POINT_FEATURES;
+        let rows = pillars.features.len() / POINT_FEATURES;
         let mut h = vec![0.0; rows * PILLAR_CHANNELS];
         // [points x 8] * [8 x 32]: the weight is [32 x 8], so transpose it once.
         let w_t: Vec<f32> = (0..POINT_FEATURES * PILLAR_CHANNELS)
             .map(|i| self.pfn.weight[(i % PILLAR_CHANNELS) * POINT_FEATURES + i / PILLAR_CHANNELS])
             .collect();
-        matmul(&kept, &w_t, &mut h, rows, POINT_FEATURES, PILLAR_CHANNELS);
+        matmul(&pillars.features, &w_t, &mut h, rows, POINT_FEATURES, PILLAR_CHANNELS);
         let mut out = vec![0.0f32; pillars.len() * PILLAR_CHANNELS];
         let mut point_rows = h.chunks_exact(PILLAR_CHANNELS);
-        for (feat, &n) in out.chunks_exact_mut(PILLAR_CHANNELS).zip(&counts) {
+        for (feat, &n) in out.chunks_exact_mut(PILLAR_CHANNELS).zip(&pillars.counts) {
             // ReLU then max: starting from 0 is the ReLU.
-            for point in point_rows.by_ref().take(n) {
+            for point in point_rows.by_ref().take(usize::from(n)) {
                 for ((f, v), b) in feat.iter_mut().zip(point).zip(&self.pfn.bias) {
                     *f = (*f).max(v + b);
                 }
