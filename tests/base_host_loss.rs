@@ -52,7 +52,10 @@ impl Drop for Host {
 
 fn write_config(dir: &Path, port: &Path) -> std::path::PathBuf {
     let path = dir.join("base.toml");
-    let cia402 = "[motors.cia402]\nhost_node_id = 127\nhost_heartbeat_ms = 50\nconsumer_heartbeat_ms = 150\nabort_connection_option = 3";
+    // The RPDO deadline off: the commands stop with the host too, and the deadline (100 ms by
+    // default) would stop the drives first; this checks the heartbeat path alone (the deadline
+    // has its own test in the mock drive).
+    let cia402 = "[motors.cia402]\nhost_node_id = 127\nhost_heartbeat_ms = 50\nconsumer_heartbeat_ms = 150\nabort_connection_option = 3\nrpdo_deadline_ms = 0";
     let text = slcan_base_toml(port, "cia402", "{ id = 1 }, { id = 2 }, { id = 3 }", (4.0, 8.0), cia402);
     std::fs::write(&path, text).unwrap();
     path

@@ -56,3 +56,31 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
     let pose_plot = std::fs::read_to_string(mission.join("plots/pose_error.svg")).unwrap();
     assert!(pose_plot.contains("<polyline"), "the pose error is plotted");
 }
+
+/// A view bound beyond loopback needs a token: refused before anything is simulated, naming the
+/// option; with a token file the same flags pass that check (stopped here by a bad scene name).
+#[test]
+fn a_view_beyond_loopback_without_a_token_is_refused_before_simulating() {
+    let dir = tempfile::tempdir().unwrap();
+    let started = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+        .args(["sim", "lab", "--http", "0.0.0.0:8080", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("--http") && err.contains("token"), "{err}");
+    assert!(started.elapsed().as_secs() < 10, "it simulated first");
+    let token = dir.path().join("token");
+    std::fs::write(&token, "0123456789abcdef0123456789abcdef\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_starc"))
+        .args(["sim", "no-such-scene", "--http", "0.0.0.0:8080", "--view-token-file"])
+        .arg(&token)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && !err.contains("token"), "{err}");
+}

@@ -18,7 +18,8 @@ pub struct RobotNodeConfig {
     /// The Livox driver (host address and ports, discovery, devices to connect to).
     #[serde(default)]
     pub livox: DriverConfig,
-    /// The robot's Avia; none: the first device whose data arrives.
+    /// The robot's Avia; none: the first device whose data arrives. It is also the one device
+    /// the driver accepts (added to `livox.accept_ips`) unless `[livox]` names others.
     #[serde(default)]
     pub lidar_ip: Option<Ipv4Addr>,
     /// A LIO config file (config/lio.toml); none: the defaults (internal IMU).
@@ -34,6 +35,10 @@ pub struct RobotNodeConfig {
     /// Record the robot's points, IMU, poses and detections (MCAP, ROS 2 types) here.
     #[serde(default)]
     pub record: Option<PathBuf>,
+    /// With `record`: `fdatasync` every chunk (once a second), so a power cut loses no more
+    /// than a crash does; costs a disk flush a second.
+    #[serde(default)]
+    pub record_fsync: bool,
     pub link: LinkConfig,
 }
 
@@ -116,10 +121,25 @@ pub struct FpvNodeConfig {
     /// Record the rig's points, IMU, world pose and AR frames here.
     #[serde(default)]
     pub record: Option<PathBuf>,
+    /// With `record`: `fdatasync` every chunk, as for the robot.
+    #[serde(default)]
+    pub record_fsync: bool,
     /// With `record`: keep every Nth AR frame in the recording.
     #[serde(default = "default_record_frames_every")]
     pub record_frames_every: u64,
     pub link: LinkConfig,
+}
+
+/// The driver's config with the node's own Avia named in it (`accept_ips`), so that a config
+/// giving only `lidar_ip` takes that device and no other one that broadcasts on the network.
+pub fn driver_for(livox: &DriverConfig, lidar_ip: Option<Ipv4Addr>) -> DriverConfig {
+    let mut livox = livox.clone();
+    if let Some(ip) = lidar_ip {
+        if !livox.accept_ips.contains(&ip) {
+            livox.accept_ips.push(ip);
+        }
+    }
+    livox
 }
 
 fn yes() -> bool {
@@ -247,6 +267,10 @@ mod tests {
         let path = shipped("robot.toml");
         let cfg = RobotNodeConfig::from_file(&path).unwrap();
         assert_eq!(cfg.lidar_ip, Some(Ipv4Addr::new(192, 168, 1, 101)));
+        // The driver is told to take that Avia alone, not any device that broadcasts.
+        let driver = driver_for(&cfg.livox, cfg.lidar_ip);
+        assert_eq!(driver.accept_ips, vec![Ipv4Addr::new(192, 168, 1, 101)]);
+        assert!(!driver.accept_any_device && driver.accept_codes.is_empty());
         assert!(!cfg.link.multicast_scouting);
         // Mutual TLS on, with the files `starc link certs` writes to config/certs by default.
         assert!(!cfg.link.insecure);

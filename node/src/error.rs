@@ -28,6 +28,12 @@ pub enum NodeError {
     Io { what: &'static str, source: std::io::Error },
     #[error("{0}")]
     Thread(&'static str),
+    /// The disk did not take the recording's last entries and index in time (a stalled disk);
+    /// every chunk it took is readable in recover mode.
+    #[error(
+        "the recording was not finished within {waited_s:.0} s (the disk is stalled); its closed chunks are readable"
+    )]
+    RecordingStalled { waited_s: f64 },
 }
 
 pub type Result<T> = std::result::Result<T, NodeError>;

@@ -5,8 +5,8 @@
 //! and every new detection, to the configured views (browser, framebuffer, Foxglove, PNG files)
 //! and optionally recorded. This file holds sockets, tasks and channels only.
 
-use super::config::{lio_config, render_config, FpvNodeConfig};
-use super::recording::NodeRecorder;
+use super::config::{driver_for, lio_config, render_config, FpvNodeConfig};
+use super::recording::{NodeRecorder, RecordOptions};
 use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::error::{NodeError, Result};
 use nalgebra::Isometry3;
@@ -70,6 +70,10 @@ pub struct FpvSummary {
     pub detections_refused_early: u64,
     pub detections_refused_future: u64,
     pub map_tiles: usize,
+    /// What the recording queued and dropped (none: not recording, or it could not finish).
+    pub recording: Option<crate::recording::RecordingCounts>,
+    /// The Livox driver's devices, sessions and what it refused (spoofed senders, cut scans).
+    pub livox: Option<starc_livox::live::DriverStats>,
     pub peak_rss_mib: Option<f64>,
 }
 
@@ -99,12 +103,13 @@ pub async fn run(
     if cfg.no_start_gate() {
         tracing::info!("no start gate: the first alignment is taken wherever it lands");
     }
-    let recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "fpv")).transpose()?;
+    let record = RecordOptions { fsync: cfg.record_fsync };
+    let recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "fpv", record)).transpose()?;
     let hub = ViewHub::new();
     let (views_stop, views_shutdown) = tokio::sync::watch::channel(false);
     let views = start_views(&cfg.view, hub.clone(), views_shutdown).await?;
     let mut link = LinkNode::open(&cfg.link, Role::Rig).await?;
-    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await?;
+    let (driver, mut events) = LivoxDriver::start(driver_for(&cfg.livox, cfg.lidar_ip)).await?;
     tracing::info!(host = ?driver.host, "rig node up");
 
     let mut node = RigNode {
@@ -161,8 +166,12 @@ pub async fn run(
     }
     let _ = views_stop.send(true);
     if let Some(r) = node.recorder.take() {
-        r.finish()?;
+        match r.finish() {
+            Ok(counts) => node.summary.recording = Some(counts),
+            Err(e) => tracing::warn!("recording: {e}"),
+        }
     }
+    node.summary.livox = Some(driver.stats());
     let _ = driver.stop().await;
     node.summary.map_tiles = node.side.tile_count();
     let refused = node.side.refused();

@@ -12,6 +12,7 @@ pub mod config;
 pub mod fpv;
 pub mod recording;
 pub mod robot;
+mod tiles;
 
 use recording::NodeRecorder;
 use starc_bridge::livox::{lio_scan, reading_imu};
@@ -85,16 +86,21 @@ pub async fn wait_stop(stop: &mut Stop) {
     let _ = stop.wait_for(|s| *s).await;
 }
 
-/// A stop signal that fires on SIGINT or SIGTERM, so recordings are finalized.
+/// A stop signal that fires on SIGINT, SIGTERM or SIGHUP, so recordings are finalized: an
+/// operator whose SSH session drops sends the node a SIGHUP.
 pub fn stop_on_signals() -> Result<(watch::Sender<bool>, Stop)> {
+    use tokio::signal::unix::{signal, SignalKind};
     let (tx, rx) = watch::channel(false);
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .map_err(|source| NodeError::Io { what: "waiting for SIGTERM", source })?;
+    let mut term =
+        signal(SignalKind::terminate()).map_err(|source| NodeError::Io { what: "waiting for SIGTERM", source })?;
+    let mut hangup =
+        signal(SignalKind::hangup()).map_err(|source| NodeError::Io { what: "waiting for SIGHUP", source })?;
     let signal_tx = tx.clone();
     tokio::spawn(async move {
         tokio::select! {
             _ = tokio::signal::ctrl_c() => {}
             _ = term.recv() => {}
+            _ = hangup.recv() => {}
         }
         tracing::info!("stopping");
         let _ = signal_tx.send(true);

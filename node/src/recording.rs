@@ -3,10 +3,14 @@
 //!
 //! The node hands each entry to a writer thread and goes on: converting a scan to PointCloud2,
 //! compressing chunks and waiting on a busy disk never hold up its scans, detections or frames.
-//! The queue holds a few seconds of data; when the disk falls further behind, the node waits
-//! rather than drop anything. A failing disk stops the recording with one warning rather than
-//! the node; chunks close every second, so a crash leaves a readable file, and `finish` (on
-//! SIGINT/SIGTERM or the end of a run) writes the index. Dropping the recorder finishes it too.
+//! The queue holds about four seconds of data; when the disk falls further behind, entries are
+//! dropped and counted ([`RecordingCounts`]), never waited for. A full disk is retried (the
+//! recorder keeps one chunk and drops the rest until there is room); any other disk error stops
+//! the recording with one warning rather than the node. Chunks close every second of log time
+//! and after one second without an entry, so a crash loses at most the open chunk plus what
+//! the queue holds (docs/nodes.md gives the bounds). `finish` (on SIGINT/SIGTERM/SIGHUP or the
+//! end of a run) writes the index, waiting a bounded time for a stalled disk. Dropping the
+//! recorder finishes it too.
 
 use crate::error::{NodeError, Result};
 use nalgebra::Isometry3;
@@ -18,13 +22,33 @@ use starc_pipeline::record::{Frames, PersonBox, Recorder, RecorderOptions, Recor
 use starc_time::{Clock, Stamp};
 use starc_view::ViewSnapshot;
 use std::path::Path;
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{channel, sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
-use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 /// Entries the writer may fall behind by: at the Avia's 200 Hz IMU and 10 Hz scans, about four
 /// seconds (some 40 scans, 30 MB), more than a disk's writeback stalls last.
 const QUEUE_ENTRIES: usize = 1024;
+
+/// An open chunk closes after this long without being closed by the recorder itself, so data
+/// that arrived before a silence (a LiDAR unplugged) is on disk within a second.
+const CHUNK_WALL_S: f64 = 1.0;
+
+/// How long `finish` waits for a stalled disk to take the last writes and the index.
+pub const FINISH_WAIT: Duration = Duration::from_secs(10);
+
+/// What the recording did not take, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RecordingCounts {
+    /// Entries handed to the writer.
+    pub queued: u64,
+    /// Entries dropped because the writer was `QUEUE_ENTRIES` behind (a slow or stalled disk).
+    pub dropped: u64,
+    /// Of those, scans.
+    pub dropped_scans: u64,
+    /// Entries dropped because the recording had stopped (a disk error, logged).
+    pub after_stop: u64,
+}
 
 /// What the node records, owned, for the writer thread.
 enum Entry {
@@ -37,10 +61,19 @@ enum Entry {
 
 pub struct NodeRecorder {
     tx: Option<SyncSender<Entry>>,
-    writer: Option<JoinHandle<Finished>>,
-    /// Whether the node has waited on a full queue since the writer last caught up (one warning
-    /// per episode, not per entry).
-    waited: bool,
+    /// The writer thread's end: its result, or a hang-up if it panicked.
+    done: Option<Receiver<Finished>>,
+    counts: RecordingCounts,
+    /// Whether entries have been dropped since the writer last took one (one warning per
+    /// episode, not per entry).
+    dropping: bool,
+}
+
+/// How a node records.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RecordOptions {
+    /// `fdatasync` after every chunk: the recording survives a power cut, not only a crash.
+    pub fsync: bool,
 }
 
 fn pose_msg(p: &Isometry3<f64>) -> Pose {
@@ -53,37 +86,58 @@ impl NodeRecorder {
     /// `device` names the topics (`robot`, `fpv`) and the LiDAR's frame. The file is created
     /// here, so a bad path fails the node at start.
     pub fn create(path: &Path, device: &'static str) -> Result<Self> {
-        let lidar = if device == "robot" { "avia".to_string() } else { format!("{device}_avia") };
-        let frames = Frames { lidar, ..Frames::default() };
-        let options = RecorderOptions { clock: Clock::Ptp, frames, ..RecorderOptions::default() };
-        let rec = Recorder::create(path, options).map_err(|source| NodeError::File { path: path.into(), source })?;
-        tracing::info!(path = %path.display(), "recording");
-        let (tx, rx) = sync_channel(QUEUE_ENTRIES);
-        let writer =
-            std::thread::Builder::new().name(format!("{device}-recorder")).spawn(move || write_all(rec, device, rx));
-        let writer = writer.map_err(|source| NodeError::Io { what: "starting the recorder thread", source })?;
-        Ok(Self { tx: Some(tx), writer: Some(writer), waited: false })
+        Self::create_with(path, device, RecordOptions::default())
     }
 
+    pub fn create_with(path: &Path, device: &'static str, opts: RecordOptions) -> Result<Self> {
+        let lidar = if device == "robot" { "avia".to_string() } else { format!("{device}_avia") };
+        let frames = Frames { lidar, ..Frames::default() };
+        let options =
+            RecorderOptions { clock: Clock::Ptp, frames, sync_chunks: opts.fsync, ..RecorderOptions::default() };
+        let rec = Recorder::create(path, options).map_err(|source| NodeError::File { path: path.into(), source })?;
+        tracing::info!(path = %path.display(), fsync = opts.fsync, "recording");
+        let (tx, rx) = sync_channel(QUEUE_ENTRIES);
+        let (done_tx, done) = channel();
+        let writer = std::thread::Builder::new()
+            .name(format!("{device}-recorder"))
+            .spawn(move || drop(done_tx.send(write_all(rec, device, rx))));
+        writer.map_err(|source| NodeError::Io { what: "starting the recorder thread", source })?;
+        Ok(Self { tx: Some(tx), done: Some(done), counts: RecordingCounts::default(), dropping: false })
+    }
+
+    /// What has been queued and dropped so far.
+    pub fn counts(&self) -> RecordingCounts {
+        self.counts
+    }
+
+    /// Queues `entry`, or drops and counts it: the node never waits for the disk.
     fn send(&mut self, entry: Entry) {
-        let Some(tx) = self.tx.as_ref() else { return };
-        let sent = match tx.try_send(entry) {
-            Ok(()) => {
-                self.waited = false;
-                Ok(())
-            }
-            Err(TrySendError::Full(entry)) => {
-                if !self.waited {
-                    tracing::warn!("the recording is {QUEUE_ENTRIES} entries behind: the node waits for the disk");
-                    self.waited = true;
-                }
-                tx.send(entry).map_err(|_| ())
-            }
-            Err(TrySendError::Disconnected(_)) => Err(()),
+        let Some(tx) = self.tx.as_ref() else {
+            self.counts.after_stop += 1;
+            return;
         };
-        // The writer has stopped (it logged why): record nothing more.
-        if sent.is_err() {
-            self.tx = None;
+        let is_scan = matches!(entry, Entry::Scan(_));
+        match tx.try_send(entry) {
+            Ok(()) => {
+                self.counts.queued += 1;
+                self.dropping = false;
+            }
+            Err(TrySendError::Full(_)) => {
+                self.counts.dropped += 1;
+                self.counts.dropped_scans += u64::from(is_scan);
+                if !self.dropping {
+                    tracing::warn!(
+                        dropped = self.counts.dropped,
+                        "the recording is {QUEUE_ENTRIES} entries behind the node: dropping until the disk catches up"
+                    );
+                    self.dropping = true;
+                }
+            }
+            // The writer has stopped (it logged why): record nothing more.
+            Err(TrySendError::Disconnected(_)) => {
+                self.counts.after_stop += 1;
+                self.tx = None;
+            }
         }
     }
 
@@ -124,18 +178,30 @@ impl NodeRecorder {
 
     /// Waits for the writer to write everything queued and the index; an error if the index
     /// could not be written (a disk error earlier only stopped the recording, with a warning).
-    pub fn finish(mut self) -> Result<()> {
-        self.close()
+    /// A disk that takes nothing for [`FINISH_WAIT`] is left to the writer thread, which goes on
+    /// finishing the file if the disk comes back before the process ends.
+    pub fn finish(mut self) -> Result<RecordingCounts> {
+        self.close(FINISH_WAIT)?;
+        Ok(self.counts)
     }
 
-    fn close(&mut self) -> Result<()> {
+    /// As [`finish`](Self::finish), waiting at most `wait`.
+    pub fn finish_within(mut self, wait: Duration) -> Result<RecordingCounts> {
+        self.close(wait)?;
+        Ok(self.counts)
+    }
+
+    fn close(&mut self, wait: Duration) -> Result<()> {
         self.tx = None;
-        let Some(writer) = self.writer.take() else { return Ok(()) };
-        match writer.join() {
-            Ok(Ok(Some(stats))) => tracing::info!(?stats, "recording finished"),
+        let Some(done) = self.done.take() else { return Ok(()) };
+        match done.recv_timeout(wait) {
+            Ok(Ok(Some(stats))) => tracing::info!(?stats, counts = ?self.counts, "recording finished"),
             Ok(Ok(None)) => {}
             Ok(Err(e)) => return Err(NodeError::Pipeline(e)),
-            Err(_) => return Err(NodeError::Thread("the recording's writer thread panicked")),
+            Err(RecvTimeoutError::Timeout) => return Err(NodeError::RecordingStalled { waited_s: wait.as_secs_f64() }),
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(NodeError::Thread("the recording's writer thread panicked"))
+            }
         }
         Ok(())
     }
@@ -144,7 +210,7 @@ impl NodeRecorder {
 impl Drop for NodeRecorder {
     /// A node that stops on an error still leaves a finished file.
     fn drop(&mut self) {
-        if let Err(e) = self.close() {
+        if let Err(e) = self.close(FINISH_WAIT) {
             tracing::warn!("{e}");
         }
     }
@@ -155,10 +221,30 @@ impl Drop for NodeRecorder {
 /// finish.
 type Finished = std::result::Result<Option<RecorderStats>, starc_pipeline::PipelineError>;
 
+/// The next entry; `Ok(None)` when the open chunk has waited [`CHUNK_WALL_S`] and should close
+/// first; `Err` once the node has hung up.
+fn next_entry(rx: &Receiver<Entry>, open_since: Option<Instant>) -> std::result::Result<Option<Entry>, ()> {
+    let Some(since) = open_since else { return rx.recv().map(Some).map_err(|_| ()) };
+    let left = Duration::from_secs_f64(CHUNK_WALL_S).saturating_sub(since.elapsed());
+    match rx.recv_timeout(left) {
+        Ok(entry) => Ok(Some(entry)),
+        Err(RecvTimeoutError::Timeout) => Ok(None),
+        Err(RecvTimeoutError::Disconnected) => Err(()),
+    }
+}
+
 /// The writer thread: every entry until the node hangs up, then the index.
 fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Finished {
     let (points_topic, imu_topic) = (format!("/{device}/points"), format!("/{device}/imu"));
-    for entry in rx {
+    let mut open_since: Option<Instant> = None;
+    while let Ok(next) = next_entry(&rx, open_since) {
+        let Some(entry) = next else {
+            open_since = None;
+            if let Err(e) = rec.close_chunk() {
+                return stop(rec, "closing a chunk", &e);
+            }
+            continue;
+        };
         let (what, result) = match entry {
             Entry::Scan(scan) => {
                 ("points", rec.point_cloud_on(&points_topic, &starc_bridge::livox::scan_to_cloud(&scan)))
@@ -187,15 +273,21 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Fi
             },
         };
         if let Err(e) = result {
-            tracing::warn!("recording stopped: {what}: {e}");
-            if let Err(e) = rec.finish() {
-                tracing::warn!("recording not finished cleanly: {e}");
-            }
-            // Dropping the receiver tells the node to stop sending.
-            return Ok(None);
+            return stop(rec, what, &e);
         }
+        open_since = if rec.has_open_chunk() { open_since.or_else(|| Some(Instant::now())) } else { None };
     }
     rec.finish().map(Some)
+}
+
+/// A write failed (not for lack of room: that is retried): the recording ends here, finished as
+/// far as the disk allows. Dropping the receiver tells the node to stop sending.
+fn stop(mut rec: Recorder, what: &str, e: &starc_pipeline::PipelineError) -> Finished {
+    tracing::warn!("recording stopped: {what}: {e}");
+    if let Err(e) = rec.finish() {
+        tracing::warn!("recording not finished cleanly: {e}");
+    }
+    Ok(None)
 }
 
 #[cfg(test)]

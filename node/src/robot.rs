@@ -1,9 +1,11 @@
 //! `starc robot --config robot.toml`: the robot node. Its Avia through the live driver into the
 //! robot core (LIO, detection, map); every LIO pose and every detection window to the rig over
-//! the link, changed map tiles every `map_period_ms`; optionally everything recorded.
+//! the link, changed map tiles every `map_period_ms` (from a task of their own, newest version
+//! per tile: a congested link never holds up a scan); optionally everything recorded.
 
-use super::config::{lio_config, RobotNodeConfig};
-use super::recording::NodeRecorder;
+use super::config::{driver_for, lio_config, RobotNodeConfig};
+use super::recording::{NodeRecorder, RecordOptions, RecordingCounts};
+use super::tiles::LatestTiles;
 use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
@@ -13,6 +15,7 @@ use starc_pipeline::mission::{
 };
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 
@@ -29,6 +32,12 @@ pub struct RobotSummary {
     pub imu_samples: u64,
     pub detections_sent: u64,
     pub tiles_sent: u64,
+    /// Tiles replaced by a newer version of themselves before the link took them.
+    pub tiles_superseded: u64,
+    /// What the recording queued and dropped (none: not recording, or it could not finish).
+    pub recording: Option<RecordingCounts>,
+    /// The Livox driver's devices, sessions and what it refused (spoofed senders, cut scans).
+    pub livox: Option<starc_livox::live::DriverStats>,
     /// Messages the link refused or failed to send (a non-finite pose, a session error): each
     /// counted and logged, none the end of the node.
     pub publish_errors: u64,
@@ -66,10 +75,13 @@ pub async fn run(
     let map = RobotMap::new(RobotMapConfig { coverage_ray_stride: 0, ..core_cfg.map_config() })?;
     let mut core = RobotCore::new(core_cfg)?;
     let period = Duration::from_millis(cfg.map_period_ms.max(10));
-    let (map_tx, mut tiles_rx, map_thread) = spawn_map(map, period)?;
-    let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create(p, "robot")).transpose()?;
-    let link = LinkNode::open(&cfg.link, Role::Robot).await?;
-    let (driver, mut events) = LivoxDriver::start(cfg.livox.clone()).await?;
+    let tiles = Arc::new(LatestTiles::default());
+    let (map_tx, map_thread) = spawn_map(map, period, tiles.clone())?;
+    let record = RecordOptions { fsync: cfg.record_fsync };
+    let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "robot", record)).transpose()?;
+    let link = Arc::new(LinkNode::open(&cfg.link, Role::Robot).await?);
+    let tile_task = tokio::spawn(send_tiles(link.clone(), tiles.clone()));
+    let (driver, mut events) = LivoxDriver::start(driver_for(&cfg.livox, cfg.lidar_ip)).await?;
     tracing::info!(host = ?driver.host, "robot node up");
     let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
     // Each recent scan's end, its LiDAR's clock, and when its last packet arrived (host clock).
@@ -77,23 +89,9 @@ pub async fn run(
     let mut steps: Vec<RobotStep> = Vec::new();
     let mut summary = RobotSummary::default();
     let mut seq = 0u32;
-    let mut map_alive = true;
     loop {
         tokio::select! {
             _ = wait_stop(&mut stop) => break,
-            tiles = tiles_rx.recv(), if map_alive => {
-                let Some(tiles) = tiles else {
-                    // It failed (its error comes from the join below); the node goes on without a map.
-                    tracing::warn!("the map thread stopped: no more map tiles");
-                    map_alive = false;
-                    continue;
-                };
-                for bytes in tiles {
-                    if publish(&link, &LinkMessage::MapTile { bytes }, &mut summary.publish_errors).await {
-                        summary.tiles_sent += 1;
-                    }
-                }
-            }
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
                 match feed.take(ev, recorder.as_mut()) {
@@ -148,27 +146,64 @@ pub async fn run(
         }
     }
     // The last tiles, so a rig that joins after the run still gets the whole map: the map
-    // thread sends them once it has everything.
+    // thread hands them over once it has everything.
     for placed in core.take_unmapped() {
         let _ = map_tx.send(placed);
     }
     drop(map_tx);
-    while let Some(tiles) = tiles_rx.recv().await {
-        for bytes in tiles {
-            if publish(&link, &LinkMessage::MapTile { bytes }, &mut summary.publish_errors).await {
-                summary.tiles_sent += 1;
-            }
+    if let Err(e) = map_thread.join().map_err(|_| NodeError::Thread("the map thread panicked")).and_then(|r| r) {
+        tracing::warn!("the map: {e}");
+    }
+    (summary.tiles_sent, summary.tiles_superseded) = (0, tiles.superseded());
+    match finish_tiles(tile_task).await {
+        Some((sent, errors)) => {
+            summary.tiles_sent = sent;
+            summary.publish_errors += errors;
+        }
+        None => tracing::warn!("map tiles still waiting after {} s: not sent", TILES_WAIT.as_secs()),
+    }
+    if let Some(r) = recorder.take() {
+        match r.finish() {
+            Ok(counts) => summary.recording = Some(counts),
+            Err(e) => tracing::warn!("recording: {e}"),
         }
     }
-    map_thread.join().map_err(|_| NodeError::Thread("the map thread panicked"))??;
-    if let Some(r) = recorder.take() {
-        r.finish()?;
-    }
+    summary.livox = Some(driver.stats());
     let _ = driver.stop().await;
-    link.close().await?;
+    match Arc::try_unwrap(link) {
+        Ok(link) => link.close().await?,
+        Err(_) => tracing::warn!("the link is still in use: not closed cleanly"),
+    }
     summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(?summary, "robot node down");
     Ok(summary)
+}
+
+/// How long the node waits, when stopping, for the link to take the last map tiles.
+const TILES_WAIT: Duration = Duration::from_secs(5);
+
+/// Sends every tile handed over until the map thread is done: (sent, errors).
+async fn send_tiles(link: Arc<LinkNode>, tiles: Arc<LatestTiles>) -> (u64, u64) {
+    let (mut sent, mut errors) = (0, 0);
+    while let Some(bytes) = tiles.next().await {
+        if publish(&link, &LinkMessage::MapTile { bytes }, &mut errors).await {
+            sent += 1;
+        }
+    }
+    (sent, errors)
+}
+
+/// The tile task's counts, or `None` (and the task aborted) if the link did not take the last
+/// tiles within [`TILES_WAIT`].
+async fn finish_tiles(mut task: tokio::task::JoinHandle<(u64, u64)>) -> Option<(u64, u64)> {
+    match tokio::time::timeout(TILES_WAIT, &mut task).await {
+        Ok(done) => done.ok(),
+        Err(_) => {
+            task.abort();
+            let _ = task.await;
+            None
+        }
+    }
 }
 
 /// The clock and last-packet host time of the scan ending at `end_ns` (an unknown scan: PTP, as
@@ -179,38 +214,48 @@ fn scan_of(scans: &VecDeque<(u64, Clock, u64)>, end_ns: u64) -> (Clock, u64) {
 
 type MapThread = std::thread::JoinHandle<Result<()>>;
 type PlacedScans = std::sync::mpsc::Sender<MapScan>;
-type EncodedTiles = mpsc::UnboundedReceiver<Vec<Vec<u8>>>;
 
 /// The map grown on its own thread from the placed scans the node hands it: growing it and
 /// encoding tiles (several milliseconds a second) never hold up a scan or a detection. Every
-/// `period` it sends the changed tiles, and the last ones once the node hangs up.
-fn spawn_map(mut map: RobotMap, period: Duration) -> Result<(PlacedScans, EncodedTiles, MapThread)> {
+/// `period` it hands the changed tiles to `tiles`, and the last ones once the node hangs up;
+/// then (or when it fails) it closes `tiles`.
+fn spawn_map(mut map: RobotMap, period: Duration, tiles: Arc<LatestTiles>) -> Result<(PlacedScans, MapThread)> {
     let (scans_tx, scans_rx) = std::sync::mpsc::channel::<MapScan>();
-    let (tiles_tx, tiles_rx) = mpsc::unbounded_channel();
     let thread = std::thread::Builder::new()
         .name("robot-map".into())
         .spawn(move || {
-            let mut next = Instant::now() + period;
-            loop {
-                match scans_rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
-                    Ok(placed) => map.add_scan(&placed),
-                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
-                }
-                if Instant::now() >= next {
-                    next = (next + period).max(Instant::now());
-                    // Everything the node has handed over by now goes into these tiles.
-                    while let Ok(placed) = scans_rx.try_recv() {
-                        map.add_scan(&placed);
-                    }
-                    let _ = tiles_tx.send(map.take_changed_tiles()?);
-                }
-            }
-            let _ = tiles_tx.send(map.take_changed_tiles()?);
-            Ok(())
+            let grown = grow_map(&mut map, period, &scans_rx, &tiles);
+            tiles.close();
+            grown
         })
         .map_err(|source| NodeError::Io { what: "starting the map thread", source })?;
-    Ok((scans_tx, tiles_rx, thread))
+    Ok((scans_tx, thread))
+}
+
+fn grow_map(
+    map: &mut RobotMap,
+    period: Duration,
+    scans: &std::sync::mpsc::Receiver<MapScan>,
+    tiles: &LatestTiles,
+) -> Result<()> {
+    let mut next = Instant::now() + period;
+    loop {
+        match scans.recv_timeout(next.saturating_duration_since(Instant::now())) {
+            Ok(placed) => map.add_scan(&placed),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        if Instant::now() >= next {
+            next = (next + period).max(Instant::now());
+            // Everything the node has handed over by now goes into these tiles.
+            while let Ok(placed) = scans.try_recv() {
+                map.add_scan(&placed);
+            }
+            tiles.put(map.take_changed_tiles()?);
+        }
+    }
+    tiles.put(map.take_changed_tiles()?);
+    Ok(())
 }
 
 #[cfg(test)]

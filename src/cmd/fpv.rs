@@ -1,5 +1,5 @@
-//! `starc fpv --config fpv.toml`: the responder's rig node (see `starc_node::fpv`); stops on SIGINT
-//! or SIGTERM, finishing its recording.
+//! `starc fpv --config fpv.toml`: the responder's rig node (see `starc_node::fpv`); stops on SIGINT,
+//! SIGTERM or SIGHUP, finishing its recording.
 
 use super::runtime;
 use starc_node::config::FpvNodeConfig;

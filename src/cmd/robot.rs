@@ -1,5 +1,5 @@
-//! `starc robot --config robot.toml`: the robot node (see `starc_node::robot`); stops on SIGINT or
-//! SIGTERM, finishing its recording.
+//! `starc robot --config robot.toml`: the robot node (see `starc_node::robot`); stops on SIGINT,
+//! SIGTERM or SIGHUP, finishing its recording.
 
 use super::runtime;
 use starc_node::config::RobotNodeConfig;

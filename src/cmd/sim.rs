@@ -44,6 +44,10 @@ pub struct Args {
     /// Live mission: serve the Foxglove WebSocket view here (e.g. 127.0.0.1:8765).
     #[arg(long)]
     foxglove: Option<std::net::SocketAddr>,
+    /// A file holding the token viewers must present (`openssl rand -hex 16 > FILE`); required
+    /// when --http or --foxglove binds beyond loopback. A file, so the token is not in `ps`.
+    #[arg(long, value_name = "FILE")]
+    view_token_file: Option<std::path::PathBuf>,
     /// Write every Nth camera frame's AR view as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     frames_every: u64,
@@ -51,7 +55,27 @@ pub struct Args {
     detector: super::detector_arg::DetectorArgs,
 }
 
+/// The live views `--http`, `--foxglove` and `--view-token-file` ask for, checked before any
+/// simulating: a bind beyond loopback without a token is refused here, not minutes later.
+fn views(args: &Args) -> anyhow::Result<starc_view::ViewConfig> {
+    let token = match &args.view_token_file {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            Some(
+                starc_view::ViewToken::new(text.trim())
+                    .with_context(|| format!("--view-token-file {}", path.display()))?,
+            )
+        }
+        None => None,
+    };
+    let view =
+        starc_view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, token, ..Default::default() };
+    view.validate().context("--http / --foxglove")?;
+    Ok(view)
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let view = views(&args)?;
     if args.list {
         for (name, text) in SHIPPED {
             let s = Scenario::parse(text, name)?;
@@ -142,7 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frames_every: args.frames_every,
             start_hint: Some((1.0, 20.0)),
             start_gate_m: 2.0,
-            view: starc_view::ViewConfig { http_bind: args.http, foxglove_bind: args.foxglove, ..Default::default() },
+            view,
             detect: args.detector.config()?,
         };
         super::sim_live::run(&args.out, &opts)?;

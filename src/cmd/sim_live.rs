@@ -132,6 +132,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         detect: opts.detect.clone(),
         map_period_ms: 1000,
         record: Some(opts.out.join("robot.mcap")),
+        record_fsync: false,
         link: link(Some(link_port), None)?,
     };
     let q = lidar_t_camera.rotation.quaternion();
@@ -151,6 +152,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         shared_lidar_clock: true,
         view: opts.view.clone(),
         record: Some(opts.out.join("fpv.mcap")),
+        record_fsync: false,
         record_frames_every: 5,
         link: link(None, Some(link_port))?,
     };

@@ -133,6 +133,14 @@ impl BaseConfig {
             // The heartbeat goes out from the control tick: it cannot be more frequent.
             return Err(BaseError::config("motors.cia402.host_heartbeat_ms", "must be at least one control period"));
         }
+        let deadline_ms = u64::from(self.motors.cia402.rpdo_deadline_ms);
+        if self.motors.protocol == Protocol::Cia402 && deadline_ms > 0 && deadline_ms < 2 * self.control_period_ms {
+            // One late command must not stop the base.
+            return Err(BaseError::config(
+                "motors.cia402.rpdo_deadline_ms",
+                "must be 0 or at least two control periods",
+            ));
+        }
         if self.motors.feedback_timeout_ms < self.control_period_ms {
             return Err(BaseError::config("motors.feedback_timeout_ms", "must be at least one control period"));
         }

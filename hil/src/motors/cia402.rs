@@ -6,7 +6,9 @@
 //! host's heartbeat once it has heard one; when it is silent longer than the configured time
 //! the drive sends EMCY 0x8130 (heartbeat error) and takes its abort connection option
 //! (0x6007, CiA 402): 1 fault, 2 disable voltage, 3 quick stop (target velocity zeroed, the
-//! motor brakes). Every state change is logged with the drive's time (`tracing`, target
+//! motor brakes). The RPDO deadline (0x1400:05, CiA 301's event timer of a receive PDO) does
+//! the same when commands stop while the drive is enabled: EMCY 0x8250 (RPDO timeout) and
+//! 0x6007. Every state change is logged with the drive's time (`tracing`, target
 //! `starc_hil::motors::cia402`) and the times that matter are kept in [`DriveStats`].
 
 use crate::motors::dynamics::FirstOrder;
@@ -52,9 +54,11 @@ fn dictionary(node: u8) -> BTreeMap<Address, Entry> {
         (a(0x1018, 2), ro(0x0402, 4)),
         (a(0x1018, 3), ro(1, 4)),
         (a(0x1018, 4), ro(u32::from(node), 4)),
-        (a(0x1400, 0), ro(2, 1)),
+        (a(0x1400, 0), ro(5, 1)),
         (a(0x1400, 1), rw(0x200 + n, 4)),
         (a(0x1400, 2), rw(0xFF, 1)),
+        // The RPDO deadline (ms), off (0) until the host writes it.
+        (a(0x1400, 5), rw(0, 2)),
         (a(0x1600, 0), rw(2, 1)),
         (a(0x1600, 1), rw(0x6040_0010, 4)),
         (a(0x1600, 2), rw(0x60FF_0020, 4)),
@@ -100,6 +104,11 @@ pub struct DriveStats {
     pub consumer_timeouts: u64,
     /// Drive time of the last time-out.
     pub heartbeat_lost_ns: Option<u64>,
+    /// RPDO deadline misses: no command for the time in 0x1400:05 while enabled, 0x6007 applied.
+    pub rpdo_timeouts: u64,
+    /// Drive time of the last RPDO, and of the last miss.
+    pub last_rpdo_ns: Option<u64>,
+    pub rpdo_missed_ns: Option<u64>,
     /// Drive time of the last change out of Operation Enabled: when the drive stopped driving.
     pub left_enabled_ns: Option<u64>,
     /// The state and actual velocity (drive units) now.
@@ -168,7 +177,11 @@ impl MockDrive {
     }
 
     fn get(&self, index: u16) -> u32 {
-        self.od.get(&Address::new(index, 0)).map(|e| e.value).unwrap_or(0)
+        self.get_at(Address::new(index, 0))
+    }
+
+    fn get_at(&self, at: Address) -> u32 {
+        self.od.get(&at).map(|e| e.value).unwrap_or(0)
     }
 
     fn set(&mut self, index: u16, value: u32) {
@@ -207,14 +220,28 @@ impl MockDrive {
         self.consumer_armed = false;
         self.stats.consumer_timeouts += 1;
         self.stats.heartbeat_lost_ns = Some(self.now_ns);
+        self.connection_lost("host heartbeat", silent_ms, 0x8130, out);
+    }
+
+    /// The host's commands stopped while enabled: EMCY 0x8250 and 0x6007. Monitoring starts
+    /// again with the next RPDO.
+    fn rpdo_missed(&mut self, silent_ms: f64, out: &mut Vec<CanFrame>) {
+        self.stats.last_rpdo_ns = None;
+        self.stats.rpdo_timeouts += 1;
+        self.stats.rpdo_missed_ns = Some(self.now_ns);
+        self.connection_lost("RPDO", silent_ms, 0x8250, out);
+    }
+
+    /// EMCY `code` and the abort connection option (0x6007).
+    fn connection_lost(&mut self, what: &str, silent_ms: f64, code: u16, out: &mut Vec<CanFrame>) {
         let option = self.get(object::ABORT_CONNECTION_OPTION) as u16 as i16;
         tracing::warn!(
             node = self.node,
             t_ms = self.now_ns as f64 * 1e-6,
-            "host heartbeat silent for {silent_ms:.1} ms: abort connection option {option}"
+            "{what} silent for {silent_ms:.1} ms: abort connection option {option}"
         );
         self.set(object::ERROR_REGISTER, 0x11);
-        self.emcy(0x8130, 0x11, out);
+        self.emcy(code, 0x11, out);
         match option {
             abort_connection::FAULT if !matches!(self.state, DriveState::Fault | DriveState::FaultReactionActive) => {
                 self.set(object::TARGET_VELOCITY, 0);
@@ -305,6 +332,10 @@ impl MockDrive {
             // A new entry starts monitoring afresh, with the next heartbeat heard.
             self.consumer_armed = false;
         }
+        if at.index == object::RPDO1_COMM {
+            // So does a new deadline, with the next RPDO.
+            self.stats.last_rpdo_ns = None;
+        }
         if at.index == object::CONTROLWORD {
             self.on_controlword(value.raw as u16, out);
         }
@@ -357,6 +388,9 @@ impl MockDrive {
     }
 
     fn on_nmt(&mut self, cmd: NmtCommand, out: &mut Vec<CanFrame>) {
+        // PDOs exist only in Operational: the RPDO deadline starts again with the first RPDO
+        // after any NMT command (CiA 301).
+        self.stats.last_rpdo_ns = None;
         match cmd {
             NmtCommand::Start => self.nmt = NmtState::Operational,
             NmtCommand::Stop => self.nmt = NmtState::Stopped,
@@ -413,6 +447,7 @@ impl MockDrive {
 
     fn on_rpdo(&mut self, data: &[u8], out: &mut Vec<CanFrame>) {
         self.stats.rpdos += 1;
+        self.stats.last_rpdo_ns = Some(self.now_ns);
         let mut at = 0usize;
         for (addr, size) in self.mapping(object::RPDO1_MAP) {
             let Some(bytes) = data.get(at..at + usize::from(size)) else { return };
@@ -453,6 +488,15 @@ impl MockDrive {
             let silent_ns = now_ns.saturating_sub(last);
             if silent_ns > u64::from(time_ms) * 1_000_000 {
                 self.host_lost(silent_ns as f64 * 1e-6, out);
+            }
+        }
+        let deadline_ms = u64::from(self.get_at(Address::new(object::RPDO1_COMM, 5)));
+        let watching =
+            deadline_ms > 0 && self.nmt == NmtState::Operational && self.state == DriveState::OperationEnabled;
+        if let (true, Some(last)) = (watching, self.stats.last_rpdo_ns) {
+            let silent_ns = now_ns.saturating_sub(last);
+            if silent_ns > deadline_ms * 1_000_000 {
+                self.rpdo_missed(silent_ns as f64 * 1e-6, out);
             }
         }
         let dt = self.last_step_ns.map(|t| now_ns.saturating_sub(t) as f64 * 1e-9).unwrap_or(0.0);
@@ -613,6 +657,51 @@ mod tests {
             last_tpdo.is_some_and(|t| DriveState::from_statusword(t.statusword) == Some(DriveState::QuickStopActive)),
             "{last_tpdo:?}"
         );
+    }
+
+    /// A heartbeat on the host's id goes on (produced elsewhere) while the commands stop at
+    /// `hung_from_ms`.
+    #[test]
+    fn a_drive_quick_stops_when_the_commands_stop_though_the_heartbeat_goes_on() {
+        let mut d = MockDrive::new(5, 0.05);
+        d.poll(0, &mut Vec::new());
+        let a = Address::new;
+        let consumer = starc_base::cia402::nmt::consumer_heartbeat_entry(127, 150);
+        for (at, value) in [
+            (a(0x6060, 0), Value::i8(3)),
+            (a(0x6007, 0), Value::i16(3)),
+            (a(0x1016, 1), Value::u32(consumer)),
+            (a(0x1400, 5), Value::u16(100)),
+        ] {
+            assert_eq!(sdo(&mut d, SdoRequest::Download { at, value }), Some(SdoResponse::Downloaded { at }));
+        }
+        for cw in [6u16, 7, 0x0F] {
+            sdo(&mut d, SdoRequest::Download { at: a(0x6040, 0), value: Value::u16(cw) });
+        }
+        let frame = |r: starc_base::Result<CanFrame>| r.unwrap_or_else(|e| panic!("{e}"));
+        let mut out = Vec::new();
+        d.on_frame(&frame(NmtCommand::Start.to_frame(5)), 0, &mut out);
+        let command = frame(VelocityCommand { controlword: 0x0F, target_velocity: 300 }.to_frame(5));
+        let host_beat = frame(heartbeat_frame(127, NmtState::Operational));
+        let hung_from_ms = 1000;
+        for ms in 0..=1600u64 {
+            let now = ms * 1_000_000;
+            if ms % 50 == 0 {
+                d.on_frame(&host_beat, now, &mut out);
+            }
+            if ms < hung_from_ms && ms % 10 == 0 {
+                d.on_frame(&command, now, &mut out);
+            }
+            d.poll(now, &mut out);
+        }
+        let s = d.stats;
+        assert_eq!((s.consumer_timeouts, s.rpdo_timeouts), (0, 1), "{s:?}");
+        assert_eq!(d.state(), DriveState::QuickStopActive);
+        let last_command_ns = (hung_from_ms - 10) * 1_000_000;
+        let after_ms = s.left_enabled_ns.unwrap_or(u64::MAX).saturating_sub(last_command_ns) as f64 * 1e-6;
+        assert!(after_ms > 100.0 && after_ms <= 102.0, "stopped {after_ms} ms after the last command");
+        assert!(out.iter().filter_map(|f| Emergency::parse(f).ok()).any(|e| e.node == 5 && e.code == 0x8250));
+        assert!(d.velocity().abs() < 1.0, "still turning at {}", d.velocity());
     }
 
     #[test]

@@ -25,6 +25,7 @@ pub mod msgs;
 pub mod reader;
 pub mod scan;
 pub mod schema;
+pub mod sink;
 pub mod writer;
 
 pub use reader::{messages, summarize, Decoded, ReadMode, RecordedMessage, RecordingSummary};

@@ -10,6 +10,7 @@ use super::msgs::{
     check_cloud, ColorRgba, CompressedImage, Header, Imu, Marker, MarkerArray, Odometry, PointCloud2, PointField, Pose,
     Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
 };
+use super::sink::{RetrySink, SinkGauge};
 use super::{schema, Topic};
 use crate::cloud::PointCloud;
 use crate::PipelineError;
@@ -18,6 +19,7 @@ use starc_time::{Clock, Stamp};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::Path;
+use std::sync::Arc;
 
 /// Names of the frames the recorder stamps its messages with (REP 105 where it applies).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -98,6 +100,11 @@ pub struct RecorderStats {
     pub committed_messages: u64,
     pub chunks: u64,
     pub payload_bytes: u64,
+    /// Messages not taken because the disk was full (the file stays readable; the recording
+    /// goes on once there is room).
+    pub dropped_disk_full: u64,
+    /// Writes the disk refused for lack of room; each was retried later.
+    pub disk_full_events: u64,
 }
 
 struct OpenChunk {
@@ -109,7 +116,11 @@ struct OpenChunk {
 /// Writes a STARC recording. Call [`Recorder::finish`]; dropping it finishes on a best-effort
 /// basis and logs what failed.
 pub struct Recorder {
-    writer: Option<mcap::Writer<File>>,
+    writer: Option<mcap::Writer<RetrySink<File>>>,
+    /// What the file holds back while the disk is full.
+    sink: Arc<SinkGauge>,
+    /// Messages in closed chunks that a full disk still holds in memory.
+    held_messages: u64,
     sync_file: Option<File>,
     options: RecorderOptions,
     channels: BTreeMap<String, u16>,
@@ -135,6 +146,8 @@ impl Recorder {
             ChunkCompression::None => None,
             ChunkCompression::Lz4 => Some(mcap::Compression::Lz4),
         };
+        let file = RetrySink::new(file, 0);
+        let sink = file.gauge();
         let writer = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("starc-", env!("CARGO_PKG_VERSION")))
@@ -147,6 +160,8 @@ impl Recorder {
             .map_err(mcap_err("writing the header"))?;
         Ok(Self {
             writer: Some(writer),
+            sink,
+            held_messages: 0,
             sync_file,
             options,
             channels: BTreeMap::new(),
@@ -161,7 +176,25 @@ impl Recorder {
     }
 
     pub fn stats(&self) -> RecorderStats {
-        self.stats
+        RecorderStats { disk_full_events: self.sink.full_events(), ..self.stats }
+    }
+
+    /// Whether messages wait in a chunk that has not closed yet (lost if the process dies now).
+    pub fn has_open_chunk(&self) -> bool {
+        self.open.is_some()
+    }
+
+    /// Whether the disk has taken everything so far; if not, tries again now.
+    fn disk_has_room(&mut self) -> Result<bool, PipelineError> {
+        if self.sink.held_bytes() > 0 {
+            let writer = self.writer.as_mut().ok_or_else(finished)?;
+            writer.flush().map_err(mcap_err("writing what a full disk held back"))?;
+        }
+        let room = self.sink.held_bytes() == 0;
+        if room && self.held_messages > 0 {
+            self.stats.committed_messages += std::mem::take(&mut self.held_messages);
+        }
+        Ok(room)
     }
 
     fn stamp(&self, stamp: Stamp) -> Result<Time, PipelineError> {
@@ -211,6 +244,12 @@ impl Recorder {
         log_ns: u64,
         payload: &[u8],
     ) -> Result<(), PipelineError> {
+        // A full disk: the chunk it refused stays in memory and this message is not taken,
+        // which bounds the memory held to that chunk until the disk has room again.
+        if self.open.is_none() && !self.disk_has_room()? {
+            self.stats.dropped_disk_full += 1;
+            return Ok(());
+        }
         let channel_id = self.channel(topic, type_name)?;
         let sequence = self.sequences.entry(channel_id).or_insert(0);
         *sequence = sequence.wrapping_add(1);
@@ -237,11 +276,15 @@ impl Recorder {
         };
         let writer = self.writer.as_mut().ok_or_else(finished)?;
         writer.flush().map_err(mcap_err("closing a chunk"))?;
+        self.stats.chunks += 1;
+        if self.sink.held_bytes() > 0 {
+            self.held_messages += open.messages;
+            return Ok(());
+        }
         if let Some(f) = &self.sync_file {
             f.sync_data().map_err(|e| PipelineError::io("syncing the recording", e))?;
         }
-        self.stats.chunks += 1;
-        self.stats.committed_messages += open.messages;
+        self.stats.committed_messages += open.messages + std::mem::take(&mut self.held_messages);
         Ok(())
     }
 
@@ -418,11 +461,22 @@ impl Recorder {
             return Ok(self.stats);
         };
         writer.finish().map_err(mcap_err("writing the summary"))?;
-        let file = writer.into_inner();
-        if self.options.sync_chunks {
-            file.sync_all().map_err(|e| PipelineError::io("syncing the recording", e))?;
+        let mut file = writer.into_inner();
+        file.retry().map_err(|e| PipelineError::io("writing the end of the recording", e))?;
+        if file.held_bytes() > 0 {
+            return Err(PipelineError::Recording {
+                reason: format!(
+                    "the disk is full: the last {} bytes (the index) were not written; every chunk before \
+                     them reads in recover mode",
+                    file.held_bytes()
+                ),
+            });
         }
-        Ok(self.stats)
+        self.stats.committed_messages += std::mem::take(&mut self.held_messages);
+        if self.options.sync_chunks {
+            file.get_ref().sync_all().map_err(|e| PipelineError::io("syncing the recording", e))?;
+        }
+        Ok(self.stats())
     }
 }
 

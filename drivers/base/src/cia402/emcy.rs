@@ -70,6 +70,7 @@ pub fn code_meaning(code: u16) -> &'static str {
         0x8120 => "CAN in error passive mode",
         0x8130 => "life guard or heartbeat error",
         0x8140 => "recovered from bus off",
+        0x8250 => "RPDO timeout",
         0x8400 => "velocity speed controller error",
         0x8611 => "following error",
         _ => match code & 0xFF00 {

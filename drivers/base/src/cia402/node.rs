@@ -2,7 +2,8 @@
 //!
 //! Bring-up: NMT pre-operational; heartbeat producer time (0x1017); the consumer heartbeat time
 //! of the host's heartbeat (0x1016:01) and the abort connection option (0x6007), so that the
-//! drive stops by itself when the host goes silent; optionally the PDO mapping
+//! drive stops by itself when the host goes silent; the RPDO deadline (0x1400:05), so that it
+//! also stops when the host's commands stop; optionally the PDO mapping
 //! (RPDO1 = controlword + target velocity, TPDO1 = statusword + actual velocity, event-timer
 //! driven); 0x6060 = 3 (profile velocity) checked in 0x6061; target velocity 0; fault reset and
 //! disable voltage, and the enable sequence 6 / 7 / 0x0F with the statusword read back after
@@ -52,6 +53,12 @@ pub struct Cia402Config {
     /// Written to each drive's 0x6007: 1 fault, 2 disable voltage (coast), 3 quick stop (brake
     /// on the quick-stop ramp), negative: the manufacturer's. 0 (no action) is refused.
     pub abort_connection_option: i16,
+    /// Written to each drive's RPDO1 event timer (0x1400:05), which a receive PDO uses as its
+    /// deadline (CiA 301): a drive that gets no command for this long takes 0x6007 too. A
+    /// heartbeat on the host's id proves only that something produces it (a CANopen master
+    /// daemon can, beside this program), so this is what stops a drive whose commands stop
+    /// while the heartbeat goes on. 0: not written (a drive without deadline monitoring).
+    pub rpdo_deadline_ms: u16,
 }
 
 impl Default for Cia402Config {
@@ -71,6 +78,8 @@ impl Default for Cia402Config {
             host_heartbeat_ms: 50,
             consumer_heartbeat_ms: 150,
             abort_connection_option: abort_connection::QUICK_STOP,
+            // Ten 10 ms control periods: a few late commands ride through, a hung loop does not.
+            rpdo_deadline_ms: 100,
         }
     }
 }
@@ -129,6 +138,9 @@ fn setup_steps(node: u8, c: &Cia402Config) -> Vec<Step> {
         ),
         Step::Write(a(object::ABORT_CONNECTION_OPTION, 0), Value::i16(c.abort_connection_option)),
     ];
+    if c.rpdo_deadline_ms > 0 {
+        steps.push(Step::Write(a(object::RPDO1_COMM, 5), Value::u16(c.rpdo_deadline_ms)));
+    }
     if c.configure_pdos {
         let rpdo_cob = u32::from(RPDO1_BASE) + u32::from(node);
         let tpdo_cob = u32::from(TPDO1_BASE) + u32::from(node);

@@ -30,6 +30,9 @@ pub struct DriverConfig {
     pub connect: Vec<Ipv4Addr>,
     /// Only connect to these broadcast codes (empty: every device heard).
     pub accept_codes: Vec<String>,
+    /// Connect to a device whose broadcast comes from one of these addresses too, whatever its
+    /// code (a node's `lidar_ip` lands here, so a config that names its Avia takes only it).
+    pub accept_ips: Vec<Ipv4Addr>,
     /// Host command port (0 picks a free one; it goes into the handshake).
     pub cmd_port: u16,
     /// Host point-data port.
@@ -43,8 +46,9 @@ pub struct DriverConfig {
     /// to get data.
     pub accept_unsolicited_data: bool,
     /// Connect to devices whose broadcast code is not in `accept_codes` (and whose address is
-    /// not in `connect`) too. A config that names no device at all (both lists empty) takes any
-    /// device heard, as this does; one that names its devices takes only them.
+    /// not in `connect` or `accept_ips`) too. A config that names no device at all (all three
+    /// lists empty) takes any device heard, as this does; one that names its devices takes only
+    /// them.
     pub accept_any_device: bool,
     /// Devices held at once (sessions and data-only senders, each with a scan in progress);
     /// a new one beyond is refused and counted. 32 is the Livox SDK's own limit.
@@ -68,6 +72,7 @@ impl Default for DriverConfig {
             broadcast_listen: Some(SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, ports::HOST_BROADCAST_PORT)),
             connect: Vec::new(),
             accept_codes: Vec::new(),
+            accept_ips: Vec::new(),
             cmd_port: ports::host_cmd_port(1),
             data_port: ports::host_data_port(1),
             imu_port: ports::host_data_port(1),

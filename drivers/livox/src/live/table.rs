@@ -124,11 +124,12 @@ impl Core {
     pub(crate) fn new(config: DriverConfig, host: HostEndpoint, events: mpsc::Sender<LivoxEvent>) -> Result<Self> {
         config.validate()?;
         let accept = config.accept_codes.iter().map(|c| BroadcastCode::from_text(c)).collect::<Result<Vec<_>>>()?;
-        let open = config.accept_any_device || (accept.is_empty() && config.connect.is_empty());
+        let names_none = accept.is_empty() && config.connect.is_empty() && config.accept_ips.is_empty();
+        let open = config.accept_any_device || names_none;
         if open && !config.accept_any_device && config.broadcast_listen.is_some() {
             tracing::warn!(
                 max_devices = config.max_devices,
-                "no Livox device configured (connect, accept_codes): any device heard is taken"
+                "no Livox device configured (connect, accept_codes, accept_ips): any device heard is taken"
             );
         }
         let takes_unsolicited =
@@ -226,11 +227,11 @@ impl Core {
                 return Vec::new();
             }
         }
-        if !(self.open || self.accept.contains(&code)) {
+        if !(self.open || self.accept.contains(&code) || self.config.accept_ips.contains(&ip)) {
             self.stats.unknown_broadcasts += 1;
             if worth_logging(self.stats.unknown_broadcasts) {
                 tracing::warn!(%ip, code = %code, ignored = self.stats.unknown_broadcasts,
-                    "broadcast from a Livox device not in connect or accept_codes: ignored");
+                    "broadcast from a Livox device not in connect, accept_codes or accept_ips: ignored");
             }
             return Vec::new();
         }

@@ -212,9 +212,11 @@ fn bring_up_arms_the_consumer_heartbeat_and_the_abort_option_before_enabling() {
             .count(),
         1
     );
-    // Both before the drive can be enabled (the first controlword) or started (NMT start).
+    let deadline = position(object::RPDO1_COMM, 5).unwrap_or_else(|| panic!("no 0x1400:05 write"));
+    assert_eq!(writes.get(deadline).map(|w| w.1), Some(Value::u16(100)));
+    // All before the drive can be enabled (the first controlword) or started (NMT start).
     let first_cw = position(object::CONTROLWORD, 0).unwrap_or(usize::MAX);
-    assert!(consumer < first_cw && option < first_cw, "{writes:?}");
+    assert!(consumer < first_cw && option < first_cw && deadline < first_cw, "{writes:?}");
     let nmt_start = sent.iter().position(|f| f.to_string() == "000#0103").unwrap_or(0);
     let consumer_frame = sent
         .iter()

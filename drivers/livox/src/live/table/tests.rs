@@ -202,6 +202,15 @@ fn a_config_naming_its_devices_ignores_other_broadcasts_unless_opted_in() {
     let _ = core.on_broadcast(0, from(spoofed(7), 55000), &broadcast("SPOOF"));
     assert_eq!((core.stats().devices, core.stats().unknown_broadcasts), (1, 1));
 
+    // So does a config that names an address to accept broadcasts from (a node's lidar_ip).
+    let ours_ip = Ipv4Addr::new(192, 168, 1, 101);
+    let by_ip = DriverConfig { accept_ips: vec![ours_ip], ..DriverConfig::default() };
+    let (mut core, _rx) = self::core(by_ip);
+    let _ = core.on_broadcast(0, from(spoofed(7), 55000), &broadcast(ours));
+    assert_eq!((core.stats().devices, core.stats().unknown_broadcasts), (0, 1));
+    assert_eq!(core.on_broadcast(0, from(ours_ip, 55000), &broadcast("ANY0000000001")).len(), 1);
+    assert_eq!(core.stats().sessions, 1);
+
     // The opt-in takes any device, bounded.
     let any = DriverConfig { accept_any_device: true, max_devices: 4, ..config };
     let (mut core, _rx) = self::core(any);
