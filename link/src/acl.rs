@@ -4,7 +4,69 @@
 
 use starc_pipeline::link::{map_tile_id, LinkMessage, Role};
 
+use crate::certs::{RIG_CN, ROBOT_CN};
 use crate::keys::{map_key, message_key};
+
+/// What a role's zenoh session sends on the wire: (zenoh `access_control` message names, key
+/// expression). The robot puts on its own keys, subscribes to the rig's and serves the map; the
+/// rig puts on its own keys, subscribes to the robot's and queries the map (node.rs declares
+/// nothing else: no liveliness tokens, no deletes).
+fn wire_actions(prefix: &str, sender: Role) -> [(&'static [&'static str], String); 3] {
+    let map = format!("{}/**", map_key(prefix));
+    match sender {
+        Role::Robot => [
+            (&["put"], format!("{prefix}/robot/**")),
+            (&["declare_subscriber"], format!("{prefix}/rig/**")),
+            (&["declare_queryable", "reply"], map),
+        ],
+        Role::Rig => [
+            (&["put"], format!("{prefix}/rig/**")),
+            (&["declare_subscriber"], format!("{prefix}/robot/**")),
+            (&["query"], map),
+        ],
+    }
+}
+
+/// zenoh's `access_control` section tying each role's keys to its certificate's common name
+/// (`starc link certs`: `starc-robot`, `starc-rig`), as JSON5. `LinkConfig::zenoh` writes it
+/// whenever mutual TLS is on, on both nodes: every subject is the *other* end of a transport (the
+/// name in the certificate it showed), ingress is what we take from it and egress what we send
+/// it, so one policy serves robot and rig. A peer holding the rig's certificate may put only on
+/// `<prefix>/rig/**`, subscribe to `<prefix>/robot/**` and query the map, and is sent only the
+/// robot's messages; the robot's certificate the converse. Everything else, and every transport
+/// whose certificate names neither (or that has none: plain tcp), is denied by default, so zenoh
+/// drops it on arrival before routing it anywhere: a stolen rig key cannot pass off robot
+/// detections or tiles to another rig, nor serve a forged map. zenoh allows a message when an
+/// allow rule's key expression includes the message's whole key expression.
+pub fn zenoh_access_control(prefix: &str) -> String {
+    let q = crate::config::json;
+    let (mut rules, mut subjects, mut policies) = (Vec::new(), Vec::new(), Vec::new());
+    for (peer, cn) in [(Role::Robot, ROBOT_CN), (Role::Rig, RIG_CN)] {
+        let subject = peer.name();
+        let mut ids = Vec::new();
+        // Ingress: what this subject sends us; egress: what we, its counterpart, send it.
+        for (flow, sender) in [("ingress", peer), ("egress", peer.peer())] {
+            for (messages, key) in wire_actions(prefix, sender) {
+                let id = q(&format!("{}_{}_{flow}", sender.name(), messages.join("_")));
+                let messages = messages.iter().map(|m| q(m)).collect::<Vec<_>>().join(", ");
+                rules.push(format!(
+                    "{{ id: {id}, messages: [{messages}], flows: [\"{flow}\"], permission: \"allow\", key_exprs: [{}] }}",
+                    q(&key)
+                ));
+                ids.push(id);
+            }
+        }
+        subjects.push(format!("{{ id: {}, cert_common_names: [{}] }}", q(subject), q(cn)));
+        policies.push(format!("{{ id: {}, subjects: [{}], rules: [{}] }}", q(subject), q(subject), ids.join(", ")));
+    }
+    let list = |items: Vec<String>| format!("[\n    {}\n  ]", items.join(",\n    "));
+    format!(
+        "{{\n  enabled: true,\n  default_permission: \"deny\",\n  rules: {},\n  subjects: {},\n  policies: {}\n}}",
+        list(rules),
+        list(subjects),
+        list(policies)
+    )
+}
 
 /// Why a decoded message was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,9 +115,23 @@ pub fn check(prefix: &str, sender: Role, key: &str, msg: &LinkMessage, fetched: 
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use starc_time::{Clock, Stamp};
+
+    #[test]
+    fn the_policy_by_certificate_name_is_a_zenoh_access_control_section() {
+        let policy = zenoh_access_control("starc");
+        let mut z = zenoh::Config::default();
+        z.insert_json5("access_control", &policy).unwrap();
+        // Each role's sending rights, once as what we take from it and once as what we send it.
+        assert_eq!(policy.matches("permission: \"allow\"").count(), 12, "{policy}");
+        assert!(policy.contains(
+            r#"{ id: "rig_put_ingress", messages: ["put"], flows: ["ingress"], permission: "allow", key_exprs: ["starc/rig/**"] }"#
+        ));
+        assert!(policy.contains(r#"{ id: "rig", cert_common_names: ["starc-rig"] }"#), "{policy}");
+    }
 
     fn heartbeat(role: Role) -> LinkMessage {
         LinkMessage::Heartbeat { role, seq: 1, sent_host_ns: 2, map_tiles: 0 }

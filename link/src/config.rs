@@ -44,7 +44,9 @@ pub struct TlsConfig {
     pub cert: Option<PathBuf>,
     #[serde(default)]
     pub key: Option<PathBuf>,
-    /// Mutual TLS: listeners refuse connectors without a certificate from `root_ca`.
+    /// Mutual TLS: listeners refuse connectors without a certificate from `root_ca`. With `cert`
+    /// and `key`, zenoh also grants each role's keys by the other end's certificate name
+    /// (`acl::zenoh_access_control`).
     #[serde(default)]
     pub mutual: bool,
     /// Check that the listener's certificate names the host or IP connected to.
@@ -124,7 +126,8 @@ pub struct LinkConfig {
     #[serde(default)]
     pub insecure: bool,
     /// A zenoh JSON5 config file to start from: its `transport/link/tls` and `access_control`
-    /// sections (and anything else) apply; the fields above are written over it.
+    /// sections (and anything else) apply; the fields above are written over it. An
+    /// `access_control` it enables replaces the built-in policy by certificate name.
     #[serde(default)]
     pub zenoh_config: Option<PathBuf>,
     #[serde(default)]
@@ -198,7 +201,7 @@ impl Default for LinkConfig {
     }
 }
 
-fn json(s: &str) -> String {
+pub(crate) fn json(s: &str) -> String {
     // A JSON string literal (endpoints and paths hold no control characters worth keeping).
     let mut out = String::with_capacity(s.len() + 2);
     out.push('"');
@@ -355,6 +358,8 @@ impl LinkConfig {
                 .map_err(|e| LinkError::ConfigFile { path: p.clone(), reason: e.to_string() })?,
             None => zenoh::Config::default(),
         };
+        // A policy of the file's own (below, with TLS).
+        let own_policy = z.get_json("access_control/enabled").is_ok_and(|v| v == "true");
         let mut set = |key: &'static str, value: String| {
             z.insert_json5(key, &value).map_err(|e| LinkError::Config { field: key, reason: e.to_string() })
         };
@@ -397,6 +402,16 @@ impl LinkConfig {
             }
             set("transport/link/tls/enable_mtls", t.mutual.to_string())?;
             set("transport/link/tls/verify_name_on_connect", t.verify_name.to_string())?;
+            // With mutual TLS every transport carries the other end's certificate name, so zenoh
+            // itself can tie keys to roles (acl::zenoh_access_control): a stolen rig key then
+            // cannot put robot messages, nor have them routed on to another rig. Without
+            // mutual TLS a connector shows no name, and plain tcp never does: no policy by name
+            // can apply there. A zenoh_config file that enables its own access_control keeps
+            // it untouched (its author chose; zenoh has one policy per session, and merging
+            // two default permissions has no clear meaning).
+            if t.mutual && t.cert.is_some() && t.key.is_some() && !own_policy {
+                set("access_control", crate::acl::zenoh_access_control(&self.key_prefix))?;
+            }
         }
         Ok(z)
     }

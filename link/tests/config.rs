@@ -89,3 +89,30 @@ fn zenoh_never_reassembles_more_than_our_largest_frame() {
     assert!(LinkConfig::from_toml("queue_bytes = 0").is_err());
     assert!(LinkConfig::from_toml("max_tile_version_lead = 0").is_err());
 }
+
+#[test]
+fn mutual_tls_ties_each_role_to_its_certificate_name_unless_the_file_brings_its_own_policy() {
+    let tls = "[tls]\nroot_ca = \"ca.pem\"\ncert = \"r.pem\"\nkey = \"r.key\"\n";
+    let z = LinkConfig::from_toml(&format!("key_prefix = \"fleet/a\"\n{tls}mutual = true\n")).unwrap().zenoh().unwrap();
+    assert_eq!(z.get_json("access_control/enabled").unwrap(), "true");
+    assert_eq!(z.get_json("access_control/default_permission").unwrap(), "\"deny\"");
+    let subjects = z.get_json("access_control/subjects").unwrap();
+    assert!(subjects.contains("\"starc-robot\"") && subjects.contains("\"starc-rig\""), "{subjects}");
+    let rules = z.get_json("access_control/rules").unwrap();
+    assert!(rules.contains("\"fleet/a/rig/**\"") && rules.contains("\"fleet/a/robot/map/**\""), "{rules}");
+    // No certificate names to go by: nothing written (zenoh's default, disabled).
+    for no_names in [String::new(), format!("{tls}mutual = false\n")] {
+        let z = LinkConfig::from_toml(&no_names).unwrap().zenoh().unwrap();
+        assert_eq!(z.get_json("access_control/enabled").unwrap(), "false", "{no_names}");
+    }
+    // A zenoh_config file enabling its own access_control keeps it.
+    let dir = tempfile::tempdir().unwrap();
+    let own = r#"{ access_control: { enabled: true, default_permission: "allow",
+        rules: [{ id: "mine", messages: ["put"], flows: ["ingress"], permission: "deny", key_exprs: ["x"] }],
+        subjects: [{ id: "everyone" }], policies: [{ rules: ["mine"], subjects: ["everyone"] }] } }"#;
+    std::fs::write(dir.path().join("z.json5"), own).unwrap();
+    std::fs::write(dir.path().join("link.toml"), format!("zenoh_config = \"z.json5\"\n{tls}mutual = true\n")).unwrap();
+    let z = LinkConfig::from_file(&dir.path().join("link.toml")).unwrap().zenoh().unwrap();
+    assert_eq!(z.get_json("access_control/default_permission").unwrap(), "\"allow\"");
+    assert!(z.get_json("access_control/rules").unwrap().contains("\"mine\""));
+}

@@ -1,5 +1,6 @@
 //! A hostile zenoh peer (a plain zenoh session, as a stranger on the WiFi would run): without a
-//! certificate it cannot connect to a mutual-TLS robot, read or put; reaching a plain loopback
+//! certificate it cannot connect to a mutual-TLS robot, read or put; with the rig's certificate
+//! it cannot put the robot's messages nor serve its map to the rig; reaching a plain loopback
 //! node, what it puts beyond its role, on the wrong key, in bursts or as map tiles out of bounds
 //! is dropped and counted, and memory stays bounded.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -25,9 +26,15 @@ use zenoh::qos::CongestionControl;
 /// background; with `root_ca`, it trusts our CA (the CA certificate is not secret) but holds no
 /// certificate of its own.
 async fn stranger(endpoint: &str, root_ca: Option<&Path>) -> zenoh::Session {
+    session("peer", endpoint, root_ca, None).await
+}
+
+/// A zenoh session in `mode` ("peer" or "client": a hostile end picks either) dialling
+/// `endpoint` only; with `leaf` (certificate, key) it shows that certificate (mutual TLS).
+async fn session(mode: &str, endpoint: &str, root_ca: Option<&Path>, leaf: Option<(&Path, &Path)>) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     let mut set = |k: &str, v: String| c.insert_json5(k, &v).unwrap();
-    set("mode", "\"peer\"".into());
+    set("mode", format!("\"{mode}\""));
     set("connect/endpoints", format!("[\"{endpoint}\"]"));
     set("listen/endpoints", "[]".into());
     set("connect/timeout_ms", "-1".into());
@@ -37,6 +44,11 @@ async fn stranger(endpoint: &str, root_ca: Option<&Path>) -> zenoh::Session {
     set("scouting/gossip/enabled", "false".into());
     if let Some(ca) = root_ca {
         set("transport/link/tls/root_ca_certificate", format!("\"{}\"", ca.display()));
+    }
+    if let Some((cert, key)) = leaf {
+        set("transport/link/tls/connect_certificate", format!("\"{}\"", cert.display()));
+        set("transport/link/tls/connect_private_key", format!("\"{}\"", key.display()));
+        set("transport/link/tls/enable_mtls", "true".into());
     }
     zenoh::open(c).await.unwrap()
 }
@@ -181,6 +193,97 @@ async fn a_peer_without_a_certificate_cannot_connect_read_or_put() {
         sub.undeclare().await.unwrap();
         s.close().await.unwrap();
     }
+    rig.close().await.unwrap();
+    robot.close().await.unwrap();
+}
+
+/// An insider: a zenoh session holding the rig's valid certificate (a stolen rig, a rig host
+/// taken over) joins a mutual-TLS robot while the real rig is linked, as a peer and then as a
+/// client (a peer brokers for its clients: without zenoh's access control by certificate name a
+/// client's `starc/robot/detections` reached the rig through the robot, 20 of 20). It puts robot
+/// detections and map tiles on the robot's keys and serves a forged map tile on the robot's map
+/// queryable key: none of it reaches the rig, and the robot's inbox takes nothing; its rig-keyed
+/// detections (allowed by name, refused by kind) show that it was connected and heard.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_peer_holding_the_rig_certificate_cannot_put_robot_messages_or_serve_the_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let files = make_certs(&certs, &["127.0.0.1".into()], false).unwrap();
+    let (mut robot, port) = open_listening(
+        |p| LinkConfig { tls: Some(tls(&certs, "robot")), ..fast(vec![format!("tls/127.0.0.1:{p}")], vec![]) },
+        Role::Robot,
+    )
+    .await;
+    // The robot's one real tile, fetched by the rig when the link comes up (the map query and its
+    // replies pass the built-in policy).
+    robot.publish(&LinkMessage::MapTile { bytes: tile(0, 1) }).await.unwrap();
+    let endpoint = format!("tls/127.0.0.1:{port}");
+    let mut rig = LinkNode::open(
+        &LinkConfig { tls: Some(tls(&certs, "rig")), ..fast(vec![], vec![endpoint.clone()]) },
+        Role::Rig,
+    )
+    .await
+    .unwrap();
+    assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
+    assert!(wait_up(&robot, Duration::from_secs(2)).await, "{:?}", robot.health());
+
+    let forged_map = encode(&LinkMessage::MapTile { bytes: tile(5, 7) }).unwrap();
+    let mut witnessed = 0;
+    for mode in ["peer", "client"] {
+        let insider = session(mode, &endpoint, Some(&files.ca_cert), Some((&files.rig_cert, &files.rig_key))).await;
+        // Connected and heard: its rig-keyed detections reach the robot (refused there by kind).
+        let mut heard = false;
+        for seq in 0..100 {
+            put(&insider, "starc/rig/detections", &detections(seq, 10)).await;
+            witnessed += 1;
+            if wait_for(Duration::from_millis(50), || robot.health().refused.kind == witnessed).await {
+                heard = true;
+                break;
+            }
+        }
+        assert!(heard, "{mode}: the insider never reached the robot: {:?}", robot.health());
+        let forged = forged_map.clone();
+        let queryable = insider
+            .declare_queryable("starc/robot/map/**")
+            .callback(move |query| {
+                use zenoh::Wait;
+                let _ = query.reply("starc/robot/map/5/0/0", forged.clone()).wait();
+            })
+            .await
+            .unwrap();
+        for seq in 0..20 {
+            put(&insider, "starc/robot/detections", &detections(900 + seq, 10)).await;
+        }
+        for x in 10..15 {
+            put(&insider, "starc/robot/map_tile", &LinkMessage::MapTile { bytes: tile(x, 1) }).await;
+        }
+        // A map fetch now would reach the forged queryable if the robot had taken its declaration.
+        let fetched = rig.health().map_tiles_fetched;
+        rig.request_map();
+        assert!(
+            wait_for(Duration::from_secs(3), || rig.health().map_tiles_fetched > fetched).await,
+            "{mode}: {:?}",
+            rig.health()
+        );
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        queryable.undeclare().await.unwrap();
+        insider.close().await.unwrap();
+    }
+    let mut tiles = Vec::new();
+    while let Some(r) = rig.try_recv() {
+        match r.msg {
+            LinkMessage::Detections { seq, .. } => panic!("the rig took forged detections {seq}"),
+            LinkMessage::MapTile { bytes } => tiles.push(starc_pipeline::link::map_tile_id(&bytes).unwrap()),
+            _ => {}
+        }
+    }
+    // Only the robot's own tile, once on link up and once per fetch asked for.
+    assert!(!tiles.is_empty() && tiles.iter().all(|t| *t == ((0, 0, 0), 1)), "{tiles:?}");
+    let h = rig.health();
+    assert_eq!((h.refused, h.decode_errors, h.map_tiles), (Default::default(), 0, 1), "{h:?}");
+    let h = robot.health();
+    assert_eq!((h.refused.kind, h.refused.key, h.received, h.decode_errors), (witnessed, 0, 0, 0), "{h:?}");
+    assert!(robot.try_recv().is_none());
     rig.close().await.unwrap();
     robot.close().await.unwrap();
 }

@@ -1,4 +1,5 @@
-//! TLS with a throwaway CA made by the openssl CLI, and zenoh access control denying one key.
+//! TLS with a throwaway CA made by the openssl CLI (a rig with another CA's certificate, or with
+//! the robot's, never comes up), and zenoh access control from a user's file denying one key.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
@@ -17,7 +18,9 @@ fn openssl(dir: &Path, args: &[&str]) {
     assert!(out.status.success(), "openssl {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
-/// A CA (`<name>-ca.pem`) and a leaf for 127.0.0.1 signed by it (`<name>.pem`, `<name>.key`).
+/// A CA (`<name>-ca.pem`) and two leaves for 127.0.0.1 signed by it: `<name>-robot.pem` and
+/// `<name>-rig.pem` (with their `.key`), named `starc-robot` and `starc-rig` as `starc link certs`
+/// names them (with mutual TLS the link grants each role by that name: acl::zenoh_access_control).
 fn make_pki(dir: &Path, name: &str) {
     let ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"];
     let ca_key = format!("{name}-ca.key");
@@ -27,39 +30,42 @@ fn make_pki(dir: &Path, name: &str) {
     a.extend(["-keyout", &ca_key, "-out", &ca, "-days", "2", "-subj", "/CN=starc test CA"]);
     a.extend(["-addext", "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign"]);
     openssl(dir, &a);
-    let key = format!("{name}.key");
-    let csr = format!("{name}.csr");
-    let mut a = vec!["req"];
-    a.extend(ec);
-    a.extend(["-keyout", &key, "-out", &csr, "-subj", "/CN=starc-robot"]);
-    openssl(dir, &a);
     let ext = format!("{name}.ext");
     std::fs::write(
         dir.join(&ext),
         "subjectAltName=IP:127.0.0.1\nbasicConstraints=critical,CA:FALSE\nkeyUsage=critical,digitalSignature\nextendedKeyUsage=serverAuth,clientAuth\n",
     )
     .unwrap();
-    let pem = format!("{name}.pem");
-    openssl(
-        dir,
-        &[
-            "x509",
-            "-req",
-            "-in",
-            &csr,
-            "-CA",
-            &ca,
-            "-CAkey",
-            &ca_key,
-            "-CAcreateserial",
-            "-out",
-            &pem,
-            "-days",
-            "2",
-            "-extfile",
-            &ext,
-        ],
-    );
+    for (leaf, cn) in [("robot", "starc-robot"), ("rig", "starc-rig")] {
+        let key = format!("{name}-{leaf}.key");
+        let csr = format!("{name}-{leaf}.csr");
+        let subj = format!("/CN={cn}");
+        let mut a = vec!["req"];
+        a.extend(ec);
+        a.extend(["-keyout", &key, "-out", &csr, "-subj", &subj]);
+        openssl(dir, &a);
+        let pem = format!("{name}-{leaf}.pem");
+        openssl(
+            dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                &csr,
+                "-CA",
+                &ca,
+                "-CAkey",
+                &ca_key,
+                "-CAcreateserial",
+                "-out",
+                &pem,
+                "-days",
+                "2",
+                "-extfile",
+                &ext,
+            ],
+        );
+    }
 }
 
 fn tls_cfg(dir: &Path, listen: Vec<String>, connect: Vec<String>, ca: &str, leaf: &str) -> LinkConfig {
@@ -82,18 +88,27 @@ async fn tls_link_with_a_private_ca_and_a_stranger_refused() {
     make_pki(dir.path(), "other");
     let tls_ep = |port: u16| format!("tls/127.0.0.1:{port}");
     let (robot, port) =
-        open_listening(|port| tls_cfg(dir.path(), vec![tls_ep(port)], vec![], "good", "good"), Role::Robot).await;
+        open_listening(|port| tls_cfg(dir.path(), vec![tls_ep(port)], vec![], "good", "good-robot"), Role::Robot).await;
     let ep = tls_ep(port);
 
     // A rig trusting another CA (and holding a certificate from it) never gets a link.
     let stranger =
-        LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep.clone()], "other", "other"), Role::Rig).await.unwrap();
+        LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep.clone()], "other", "other-rig"), Role::Rig).await.unwrap();
     assert!(!wait_up(&stranger, Duration::from_millis(1500)).await, "{:?}", stranger.health());
     assert_eq!(robot.health().state, LinkState::Lost);
     stranger.close().await.unwrap();
 
-    // The rig with the right CA does, and messages flow.
-    let mut rig = LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep], "good", "good"), Role::Rig).await.unwrap();
+    // Nor does a rig showing the robot's certificate (right CA, the robot's name): the role comes
+    // with the name, and the robot's role sends nothing a robot would take (zenoh's access
+    // control drops its rig heartbeats on arrival, and the robot's own messages on the way out).
+    let impostor =
+        LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep.clone()], "good", "good-robot"), Role::Rig).await.unwrap();
+    assert!(!wait_up(&impostor, Duration::from_millis(1500)).await, "{:?}", impostor.health());
+    assert_eq!(robot.health().state, LinkState::Lost);
+    impostor.close().await.unwrap();
+
+    // The rig with the right CA and its own certificate does, and messages flow.
+    let mut rig = LinkNode::open(&tls_cfg(dir.path(), vec![], vec![ep], "good", "good-rig"), Role::Rig).await.unwrap();
     assert!(wait_up(&rig, Duration::from_secs(5)).await, "{:?}", rig.health());
     // Poses are droppable, and "up" comes from heartbeats, which can arrive before the rig's pose
     // subscription has reached the robot: a busy host may lose the first one, so a round that
