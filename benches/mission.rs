@@ -84,6 +84,10 @@ fn offline(dir: &Path) -> Result<(), String> {
     let truth = Truth::load(dir).map_err(|e| e.to_string())?;
     let inputs =
         starc_bridge::from_capture(&dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP).map_err(|e| e.to_string())?;
+    // With the base's wheels, as the live robot node has them.
+    let base = starc_eval::wheels::run_wheel_feedback(dir).map_err(|e| e.to_string())?;
+    let wheels = starc_eval::wheels::run_wheel_samples(dir, &base).map_err(|e| e.to_string())?;
+    let inputs = starc_bridge::wheels::with_wheels(inputs, wheels);
     let run = Offline::scored_with_hint(truth, dir.join("offline"), 0, true);
     offline::run(inputs, run).map(drop).map_err(|e| e.to_string())
 }

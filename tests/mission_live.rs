@@ -64,6 +64,8 @@ fn the_live_mission_links_the_nodes_and_aligns_the_rig() {
     let nodes: Value = serde_json::from_str(&std::fs::read_to_string(mission.join("nodes.json")).unwrap()).unwrap();
     assert!(f64_at(&nodes, "/robot/tiles_sent") > 10.0, "{nodes}");
     assert_eq!(f64_at(&nodes, "/robot/detections_sent"), f64_at(&nodes, "/fpv/detections_received"), "{nodes}");
+    // The base's feedback reached the robot's LIO: the run's CAN log, replayed as its bus.
+    assert!(f64_at(&nodes, "/robot/wheel_twists") > 100.0, "{nodes}");
 
     // Both recordings decode with real ROS 2 tooling.
     let robot = topics(&mission.join("robot.mcap"));
@@ -73,6 +75,8 @@ fn the_live_mission_links_the_nodes_and_aligns_the_rig() {
         (&robot, "/robot/imu"),
         (&robot, "/robot/odom"),
         (&robot, "/detections/markers"),
+        (&robot, "/robot/wheel_odom"),
+        (&robot, "/robot/can/rx"),
         (&fpv, "/fpv/points"),
         (&fpv, "/fpv/imu"),
         (&fpv, "/fpv/odom"),

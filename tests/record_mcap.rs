@@ -11,7 +11,7 @@
 
 use serde_json::{json, Value};
 use starc_pipeline::cloud::{CloudPoint, PointCloud};
-use starc_pipeline::record::msgs::{Pose, Quaternion, Vector3};
+use starc_pipeline::record::msgs::{CanFrameMsg, Pose, Quaternion, Vector3};
 use starc_pipeline::record::reader::{self, cloud_from_msg};
 use starc_pipeline::record::{ChunkCompression, Decoded, PersonBox, ReadMode, Recorder, RecorderOptions, Topic};
 use starc_time::{Clock, Stamp};
@@ -137,6 +137,29 @@ fn write_everything(path: &Path, compression: ChunkCompression) -> Vec<Value> {
         let list = [("map", "odom", pose(1.0, 0.0)), ("odom", "base_link", p)];
         rec.tf(ptp(ns), &list).unwrap();
         expected.push(json!([Topic::Tf.name(), ns, tf_json(ns, &list)]));
+    }
+    for i in 0..10u64 {
+        let ns = T0_NS + 7_000_000 + i * 40_000_000;
+        let p = pose(0.04 * i as f64, 0.05 * i as f64);
+        rec.wheel_odometry(ptp(ns), p, [0.25, -0.05, 0.0], [0.0, 0.0, 0.2]).unwrap();
+        expected.push(json!([Topic::WheelOdom.name(), ns, {
+            "frame": "wheel_odom", "child": "base_link", "stamp_ns": ns, "position": v(&p.position),
+            "orientation": q(&p.orientation), "linear": [0.25, -0.05, 0.0], "angular": [0.0, 0.0, 0.2],
+        }]));
+    }
+    for i in 0..12u64 {
+        let ns = T0_NS + 3_000_000 + i * 10_000_000;
+        let frame = CanFrameMsg {
+            id: 0x201 + (i % 3) as u32,
+            dlc: 8,
+            data: [i as u8, 0x10, 0, 0x57, 0, 0, 0x1E, 0],
+            ..CanFrameMsg::default()
+        };
+        rec.can_frame(ptp(ns), &frame).unwrap();
+        expected.push(json!([Topic::CanRx.name(), ns, {
+            "stamp_ns": ns, "id": frame.id, "is_rtr": false, "is_extended": false, "is_error": false,
+            "dlc": 8, "data": frame.data,
+        }]));
     }
     for i in 0..3u64 {
         let ns = T0_NS + 20_000_000 + i * 100_000_000;
@@ -379,7 +402,7 @@ fn starc_inspect_summarizes_a_recording() {
     assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
     println!("{text}");
     assert!(text.contains("(MCAP, finished)"), "{text}");
-    assert!(text.contains(&format!("{} on 8 topics", expected.len())), "{text}");
+    assert!(text.contains(&format!("{} on {} topics", expected.len(), Topic::ALL.len())), "{text}");
     let imu = text.lines().find(|l| l.starts_with("/robot/imu")).unwrap();
     assert!(imu.contains("sensor_msgs/msg/Imu") && imu.contains(" 100 ") && imu.ends_with("200.0"), "{imu}");
 

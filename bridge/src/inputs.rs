@@ -97,6 +97,7 @@ fn recording(path: PathBuf) -> Result<Inputs, BridgeError> {
         match recorded(&m, period_ns) {
             Ok(Some(Recorded::Imu(dev, s))) => side(&dev).map(|d| Ok(Input::Imu(d, s))),
             Ok(Some(Recorded::Scan(dev, s))) => side(&dev).map(|d| Ok(Input::Scan(d, s))),
+            Ok(Some(Recorded::Wheel(dev, w))) => side(&dev).map(|d| Ok(Input::Wheel(d, w))),
             Ok(None) => None,
             Err(e) => Some(Err(e)),
         }

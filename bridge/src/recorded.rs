@@ -1,9 +1,10 @@
-//! Scans and IMU samples read back from a node's MCAP recording (`/DEVICE/points` as
-//! `sensor_msgs/PointCloud2` with per-point `t`, `/DEVICE/imu` as `sensor_msgs/Imu`).
+//! Scans, IMU samples and wheel odometry read back from a node's MCAP recording
+//! (`/DEVICE/points` as `sensor_msgs/PointCloud2` with per-point `t`, `/DEVICE/imu` as
+//! `sensor_msgs/Imu`, `/DEVICE/wheel_odom` as `nav_msgs/Odometry`: its twist).
 
 use crate::BridgeError;
 use nalgebra::Vector3;
-use starc_pipeline::lio::{ImuSample, LioScan, TimedPoint};
+use starc_pipeline::lio::{ImuSample, LioScan, TimedPoint, WheelSample};
 use starc_pipeline::record::reader::cloud_from_msg;
 use starc_pipeline::record::{Decoded, RecordedMessage};
 use starc_time::Clock;
@@ -13,6 +14,8 @@ use starc_time::Clock;
 pub enum Recorded {
     Imu(String, ImuSample),
     Scan(String, LioScan),
+    /// The base's twist as the robot node fed it to its LIO (already on the LiDAR's clock).
+    Wheel(String, WheelSample),
 }
 
 /// Reads a recorded scan (stamped at its start, with per-point `t`; it ends `period_ns` later,
@@ -20,7 +23,7 @@ pub enum Recorded {
 pub fn recorded(m: &RecordedMessage, period_ns: u64) -> Result<Option<Recorded>, BridgeError> {
     let device = m.topic.trim_start_matches('/').split('/').next().unwrap_or("").to_string();
     let leaf = m.topic.rsplit('/').next().unwrap_or("");
-    if leaf != "points" && leaf != "imu" {
+    if leaf != "points" && leaf != "imu" && leaf != "wheel_odom" {
         return Ok(None);
     }
     let bad = |source| BridgeError::Message { topic: m.topic.clone(), sequence: m.sequence, source };
@@ -47,6 +50,14 @@ pub fn recorded(m: &RecordedMessage, period_ns: u64) -> Result<Option<Recorded>,
                 acc_m_s2: Vector3::new(a.x, a.y, a.z),
             };
             Some(Recorded::Imu(device, sample))
+        }
+        Decoded::Odometry(msg) if leaf == "wheel_odom" => {
+            let Some(t_ns) = msg.header.stamp.to_ns() else { return Ok(None) };
+            let (v, w) = (&msg.twist.0, &msg.twist.1);
+            Some(Recorded::Wheel(
+                device,
+                WheelSample { t_ns, clock: Clock::Ptp, vx_m_s: v.x, vy_m_s: v.y, wz_rad_s: w.z },
+            ))
         }
         _ => None,
     })

@@ -83,35 +83,66 @@ impl WheelFeedback {
     }
 }
 
+/// The base's twist from its feedback frames as they come, one per cycle (every wheel heard
+/// once), sans-IO: the log reader and the robot node's live feed both use it.
+pub struct WheelDecoder {
+    base: WheelFeedback,
+    kin: Kinematics,
+    cycle: Cycle,
+}
+
+/// The base's planar twist (x forward, y left, counter-clockwise), at the time of the first
+/// frame of its cycle, on whatever clock the frames' times were.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BaseTwist {
+    pub t_ns: u64,
+    pub vx_m_s: f64,
+    pub vy_m_s: f64,
+    pub wz_rad_s: f64,
+}
+
+impl WheelDecoder {
+    /// Refuses a base whose wheel ids do not match its kinematics (the reason in words).
+    pub fn new(base: &WheelFeedback) -> Result<Self, String> {
+        let kin = Kinematics::new(&base.kinematics).map_err(|e| e.to_string())?;
+        if base.wheels.len() != kin.wheel_count() {
+            return Err(format!("{} wheel ids for {} wheels", base.wheels.len(), kin.wheel_count()));
+        }
+        let cycle = Cycle::new(kin.wheel_count());
+        Ok(Self { base: base.clone(), kin, cycle })
+    }
+
+    /// One frame at `t_ns`; the twist once its cycle is complete. Frames that are not this
+    /// base's feedback (commands, other nodes) are ignored.
+    pub fn push(&mut self, t_ns: u64, frame: &CanFrame) -> Option<BaseTwist> {
+        let (wheel, rad_s) = self.base.wheel_rate(frame)?;
+        let (t_ns, rates) = self.cycle.add(t_ns, wheel, rad_s)?;
+        let tw = self.kin.body_twist(&rates)?;
+        Some(BaseTwist { t_ns, vx_m_s: tw.vx_m_s, vy_m_s: tw.vy_m_s, wz_rad_s: tw.wz_rad_s })
+    }
+}
+
 /// The wheels' twists from a log, one per cycle (stamped by its first frame, moved by
 /// `offset_ns` onto the LiDAR's PTP clock); lines that are not this base's feedback are skipped.
 pub fn read_wheel_log(path: &Path, base: &WheelFeedback, offset_ns: i64) -> Result<Vec<WheelSample>, BridgeError> {
     let text = std::fs::read_to_string(path).map_err(|source| BridgeError::Io { path: path.into(), source })?;
     let bad = |reason: String| BridgeError::WheelLog { path: path.into(), reason };
-    let kin = Kinematics::new(&base.kinematics).map_err(|e| bad(e.to_string()))?;
-    if base.wheels.len() != kin.wheel_count() {
-        return Err(bad(format!("{} wheel ids for {} wheels", base.wheels.len(), kin.wheel_count())));
-    }
-    let mut cycle = Cycle::new(kin.wheel_count());
+    let mut decoder = WheelDecoder::new(base).map_err(bad)?;
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let logged = parse_line(line).map_err(|e| bad(format!("line {}: {e}", n + 1)))?;
-        let Some((wheel, rad_s)) = base.wheel_rate(&logged.frame) else { continue };
-        if let Some((t_ns, rates)) = cycle.add(logged.t_ns, wheel, rad_s) {
-            if let Some(tw) = kin.body_twist(&rates) {
-                let t_ns = t_ns.saturating_add_signed(offset_ns);
-                out.push(WheelSample {
-                    t_ns,
-                    clock: Clock::Ptp,
-                    vx_m_s: tw.vx_m_s,
-                    vy_m_s: tw.vy_m_s,
-                    wz_rad_s: tw.wz_rad_s,
-                });
-            }
+        if let Some(tw) = decoder.push(logged.t_ns, &logged.frame) {
+            out.push(WheelSample {
+                t_ns: tw.t_ns.saturating_add_signed(offset_ns),
+                clock: Clock::Ptp,
+                vx_m_s: tw.vx_m_s,
+                vy_m_s: tw.vy_m_s,
+                wz_rad_s: tw.wz_rad_s,
+            });
         }
     }
     if out.is_empty() {
-        return Err(bad(format!("no complete cycle of {} wheels' feedback", kin.wheel_count())));
+        return Err(bad(format!("no complete cycle of {} wheels' feedback", decoder.kin.wheel_count())));
     }
     Ok(out)
 }

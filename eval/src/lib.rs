@@ -38,6 +38,7 @@ pub mod score;
 pub mod summary;
 pub mod svg_plot;
 pub mod truth;
+pub mod wheels;
 
 pub use error::{EvalError, Result};
 pub use quantiles::{quantiles, Quantiles};

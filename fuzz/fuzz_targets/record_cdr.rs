@@ -3,7 +3,9 @@
 //! decodes re-encodes to bytes that decode and re-encode to the same bytes. The first input
 //! byte picks the message type.
 use libfuzzer_sys::fuzz_target;
-use starc_pipeline::record::msgs::{CompressedImage, Imu, MarkerArray, Odometry, PointCloud2, RosMessage, TfMessage};
+use starc_pipeline::record::msgs::{
+    CanFrameMsg, CompressedImage, Imu, MarkerArray, Odometry, PointCloud2, RosMessage, TfMessage,
+};
 
 fn check<T: RosMessage>(payload: &[u8]) {
     if let Ok(m) = T::from_cdr(payload) {
@@ -17,12 +19,13 @@ fuzz_target!(|data: &[u8]| {
     let Some((&kind, payload)) = data.split_first() else {
         return;
     };
-    match kind % 6 {
+    match kind % 7 {
         0 => check::<PointCloud2>(payload),
         1 => check::<Imu>(payload),
         2 => check::<Odometry>(payload),
         3 => check::<TfMessage>(payload),
         4 => check::<MarkerArray>(payload),
+        5 => check::<CanFrameMsg>(payload),
         _ => check::<CompressedImage>(payload),
     }
 });

@@ -32,6 +32,10 @@ pub struct RobotNodeConfig {
     /// Changed map tiles go to the rig this often.
     #[serde(default = "default_map_period_ms")]
     pub map_period_ms: u64,
+    /// The base's wheels for the LIO (`[wheels]`: its bus and its driver's config); none: the
+    /// LIO runs on the LiDAR and IMU alone.
+    #[serde(default)]
+    pub wheels: Option<crate::wheels::WheelsConfig>,
     /// Record the robot's points, IMU, poses and detections (MCAP, ROS 2 types) here.
     #[serde(default)]
     pub record: Option<PathBuf>,
@@ -213,6 +217,9 @@ impl RobotNodeConfig {
         rel(config, &mut self.detect.pillars.model);
         rel(config, &mut self.record);
         rel_link(config, &mut self.link);
+        if let Some(w) = self.wheels.as_mut() {
+            w.resolve_paths(config);
+        }
     }
 }
 
@@ -352,6 +359,23 @@ mod tests {
             let e = load::<FpvNodeConfig>(&path).unwrap().validate().unwrap_err();
             assert!(e.to_string().contains("start_gate_m"), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn a_wheels_table_takes_the_base_drivers_config() {
+        let dir = tempfile::tempdir().unwrap();
+        let base = shipped("base.toml");
+        let path = dir.path().join("robot.toml");
+        let text =
+            format!("[wheels]\nbase_config = {base:?}\ncan = \"can0\"\n\n[link]\nlisten = [\"tcp/127.0.0.1:7447\"]\n");
+        std::fs::write(&path, text).unwrap();
+        let cfg = RobotNodeConfig::from_file(&path).unwrap();
+        let wheels = cfg.wheels.unwrap();
+        assert_eq!(wheels.can.as_deref(), Some("can0"));
+        let feedback = wheels.feedback().unwrap();
+        assert_eq!(feedback.wheels.len(), feedback.kinematics.wheel_count());
+        std::fs::write(&path, "[wheels]\ncan = \"can0\"\nbogus = 1\n[link]\n").unwrap();
+        assert!(RobotNodeConfig::from_file(&path).is_err());
     }
 
     #[test]

@@ -69,6 +69,7 @@ pub struct FpvSummary {
     /// Refused by the rig's clock: before its first scan, or stamped too far ahead of it.
     pub detections_refused_early: u64,
     pub detections_refused_future: u64,
+    pub detections_refused_past: u64,
     pub map_tiles: usize,
     /// What the recording queued and dropped (none: not recording, or it could not finish).
     pub recording: Option<crate::recording::RecordingCounts>,
@@ -177,6 +178,7 @@ pub async fn run(
     let refused = node.side.refused();
     (node.summary.detections_refused_early, node.summary.detections_refused_future) =
         (refused.before_first_scan, refused.from_the_future);
+    node.summary.detections_refused_past = refused.from_the_past;
     link.close().await?;
     node.summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(summary = ?node.summary, "rig node down");
@@ -268,8 +270,14 @@ impl RigNode {
                     });
                 }
                 let take = self.side.push_detections(stamp_here, people_to_draw(&people));
-                if take == DetectionTake::RefusedFromTheFuture {
-                    tracing::debug!(stamp_here, "a detection stamped too far ahead of the rig's clock was refused");
+                match take {
+                    DetectionTake::RefusedFromTheFuture => {
+                        tracing::debug!(stamp_here, "a detection stamped too far ahead of the rig's clock was refused")
+                    }
+                    DetectionTake::RefusedFromThePast => {
+                        tracing::debug!(stamp_here, "a detection stamped too far behind the rig's clock was refused")
+                    }
+                    _ => {}
                 }
                 take == DetectionTake::Held
             }

@@ -13,6 +13,7 @@ pub mod fpv;
 pub mod recording;
 pub mod robot;
 mod tiles;
+pub mod wheels;
 
 use recording::NodeRecorder;
 use starc_bridge::livox::{lio_scan, reading_imu};

@@ -17,7 +17,7 @@ use nalgebra::Isometry3;
 use starc_livox::scan::Scan;
 use starc_pipeline::lio::ImuSample;
 use starc_pipeline::mission::RobotDetection;
-use starc_pipeline::record::msgs::{Pose, Quaternion, Vector3};
+use starc_pipeline::record::msgs::{CanFrameMsg, Pose, Quaternion, Vector3};
 use starc_pipeline::record::{Frames, PersonBox, Recorder, RecorderOptions, RecorderStats};
 use starc_time::{Clock, Stamp};
 use starc_view::ViewSnapshot;
@@ -50,8 +50,19 @@ pub struct RecordingCounts {
     pub after_stop: u64,
 }
 
+/// The base's feedback, recorded in batches (a real base sends thousands of frames a second,
+/// which one entry each would push out of the queue).
+enum Wheel {
+    Frame { t_ns: u64, frame: CanFrameMsg },
+    Odometry { t_ns: u64, pose: Pose, linear_m_s: [f64; 3], angular_rad_s: [f64; 3] },
+}
+
+/// Feedback items per batch entry.
+const WHEEL_BATCH: usize = 128;
+
 /// What the node records, owned, for the writer thread.
 enum Entry {
+    Wheels(Vec<Wheel>),
     Scan(Box<Scan>),
     Imu(ImuSample),
     Pose { t_ns: u64, pose: Isometry3<f64> },
@@ -64,6 +75,9 @@ pub struct NodeRecorder {
     /// The writer thread's end: its result, or a hang-up if it panicked.
     done: Option<Receiver<Finished>>,
     counts: RecordingCounts,
+    /// Feedback waiting to go out as one entry (before the next entry of another kind, so the
+    /// file keeps the order things arrived in).
+    wheels: Vec<Wheel>,
     /// Whether entries have been dropped since the writer last took one (one warning per
     /// episode, not per entry).
     dropping: bool,
@@ -102,7 +116,13 @@ impl NodeRecorder {
             .name(format!("{device}-recorder"))
             .spawn(move || drop(done_tx.send(write_all(rec, device, rx))));
         writer.map_err(|source| NodeError::Io { what: "starting the recorder thread", source })?;
-        Ok(Self { tx: Some(tx), done: Some(done), counts: RecordingCounts::default(), dropping: false })
+        Ok(Self {
+            tx: Some(tx),
+            done: Some(done),
+            counts: RecordingCounts::default(),
+            wheels: Vec::new(),
+            dropping: false,
+        })
     }
 
     /// What has been queued and dropped so far.
@@ -110,8 +130,52 @@ impl NodeRecorder {
         self.counts
     }
 
-    /// Queues `entry`, or drops and counts it: the node never waits for the disk.
+    /// Queues `entry` after any feedback batched before it.
     fn send(&mut self, entry: Entry) {
+        if !self.wheels.is_empty() {
+            let batch = std::mem::take(&mut self.wheels);
+            self.queue(Entry::Wheels(batch));
+        }
+        self.queue(entry);
+    }
+
+    fn batch(&mut self, item: Wheel) {
+        self.wheels.push(item);
+        if self.wheels.len() >= WHEEL_BATCH {
+            let batch = std::mem::take(&mut self.wheels);
+            self.queue(Entry::Wheels(batch));
+        }
+    }
+
+    /// A feedback frame from the base's bus (`/robot/can/rx`), at `t_ns` on the LiDAR's clock.
+    pub fn can_frame(&mut self, t_ns: u64, frame: &starc_can::CanFrame) {
+        let id = frame.id();
+        let mut data = [0u8; 8];
+        let bytes = frame.data();
+        if let Some(d) = data.get_mut(..bytes.len()) {
+            d.copy_from_slice(bytes);
+        }
+        let msg = CanFrameMsg {
+            id: id.raw(),
+            is_extended: id.is_extended(),
+            dlc: bytes.len() as u8,
+            data,
+            ..CanFrameMsg::default()
+        };
+        self.batch(Wheel::Frame { t_ns, frame: msg });
+    }
+
+    /// The base's wheel odometry (`/robot/wheel_odom`): planar pose (x, y, yaw) and twist.
+    pub fn wheel_odometry(&mut self, t_ns: u64, pose_xy_yaw: (f64, f64, f64), twist: [f64; 3]) {
+        let (x, y, yaw) = pose_xy_yaw;
+        let (s, c) = (yaw / 2.0).sin_cos();
+        let pose = Pose { position: Vector3::new(x, y, 0.0), orientation: Quaternion { x: 0.0, y: 0.0, z: s, w: c } };
+        let [vx, vy, wz] = twist;
+        self.batch(Wheel::Odometry { t_ns, pose, linear_m_s: [vx, vy, 0.0], angular_rad_s: [0.0, 0.0, wz] });
+    }
+
+    /// Queues `entry`, or drops and counts it: the node never waits for the disk.
+    fn queue(&mut self, entry: Entry) {
         let Some(tx) = self.tx.as_ref() else {
             self.counts.after_stop += 1;
             return;
@@ -192,6 +256,10 @@ impl NodeRecorder {
     }
 
     fn close(&mut self, wait: Duration) -> Result<()> {
+        if !self.wheels.is_empty() {
+            let batch = std::mem::take(&mut self.wheels);
+            self.queue(Entry::Wheels(batch));
+        }
         self.tx = None;
         let Some(done) = self.done.take() else { return Ok(()) };
         match done.recv_timeout(wait) {
@@ -237,6 +305,7 @@ fn next_entry(rx: &Receiver<Entry>, open_since: Option<Instant>) -> std::result:
 fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Finished {
     let (points_topic, imu_topic) = (format!("/{device}/points"), format!("/{device}/imu"));
     let mut open_since: Option<Instant> = None;
+    let mut skipped = 0u64;
     while let Ok(next) = next_entry(&rx, open_since) {
         let Some(entry) = next else {
             open_since = None;
@@ -246,6 +315,7 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Fi
             continue;
         };
         let (what, result) = match entry {
+            Entry::Wheels(batch) => ("wheels", write_wheels(&mut rec, &batch)),
             Entry::Scan(scan) => {
                 ("points", rec.point_cloud_on(&points_topic, &starc_bridge::livox::scan_to_cloud(&scan)))
             }
@@ -272,12 +342,41 @@ fn write_all(mut rec: Recorder, device: &'static str, rx: Receiver<Entry>) -> Fi
                 }
             },
         };
-        if let Err(e) = result {
-            return stop(rec, what, &e);
+        match result {
+            Ok(()) => {}
+            // The entry itself was bad (a stamp past 2038 or on another clock, a cloud that
+            // does not fit a message): it is skipped, the recording goes on.
+            Err(e) if !is_disk_error(&e) => {
+                skipped += 1;
+                if skipped.is_power_of_two() {
+                    tracing::warn!(skipped, "recording: a {what} entry was not recorded: {e}");
+                }
+            }
+            Err(e) => return stop(rec, what, &e),
         }
         open_since = if rec.has_open_chunk() { open_since.or_else(|| Some(Instant::now())) } else { None };
     }
+    if skipped > 0 {
+        tracing::warn!(skipped, "recording: entries not recorded (bad stamps or contents)");
+    }
     rec.finish().map(Some)
+}
+
+fn write_wheels(rec: &mut Recorder, batch: &[Wheel]) -> std::result::Result<(), starc_pipeline::PipelineError> {
+    for item in batch {
+        match item {
+            Wheel::Frame { t_ns, frame } => rec.can_frame(Stamp::new(*t_ns, Clock::Ptp), frame)?,
+            Wheel::Odometry { t_ns, pose, linear_m_s, angular_rad_s } => {
+                rec.wheel_odometry(Stamp::new(*t_ns, Clock::Ptp), *pose, *linear_m_s, *angular_rad_s)?
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether a write error is the file's (the disk, the container), not the entry's.
+fn is_disk_error(e: &starc_pipeline::PipelineError) -> bool {
+    matches!(e, starc_pipeline::PipelineError::Io { .. } | starc_pipeline::PipelineError::Mcap { .. })
 }
 
 /// A write failed (not for lack of room: that is retried): the recording ends here, finished as

@@ -6,6 +6,7 @@
 use super::config::{driver_for, lio_config, RobotNodeConfig};
 use super::recording::{NodeRecorder, RecordOptions, RecordingCounts};
 use super::tiles::LatestTiles;
+use super::wheels::{HostToLidar, WheelOdometry, WheelStep};
 use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
@@ -38,6 +39,11 @@ pub struct RobotSummary {
     pub recording: Option<RecordingCounts>,
     /// The Livox driver's devices, sessions and what it refused (spoofed senders, cut scans).
     pub livox: Option<starc_livox::live::DriverStats>,
+    /// Feedback frames heard from the base's bus, twists handed to the LIO, and frames heard
+    /// before the first scan gave the clock mapping (not used).
+    pub wheel_frames: u64,
+    pub wheel_twists: u64,
+    pub wheel_frames_early: u64,
     /// Messages the link refused or failed to send (a non-finite pose, a session error): each
     /// counted and logged, none the end of the node.
     pub publish_errors: u64,
@@ -81,8 +87,17 @@ pub async fn run(
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "robot", record)).transpose()?;
     let link = Arc::new(LinkNode::open(&cfg.link, Role::Robot).await?);
     let tile_task = tokio::spawn(send_tiles(link.clone(), tiles.clone()));
+    let (mut wheel_rx, wheel_task, mut wheels) = match &cfg.wheels {
+        Some(w) => {
+            let odometry = WheelOdometry::new(&w.feedback()?)?;
+            let (rx, task) = super::wheels::start(w).await?;
+            (Some(rx), Some(task), Some(odometry))
+        }
+        None => (None, None, None),
+    };
+    let mut host_to_lidar = HostToLidar::default();
     let (driver, mut events) = LivoxDriver::start(driver_for(&cfg.livox, cfg.lidar_ip)).await?;
-    tracing::info!(host = ?driver.host, "robot node up");
+    tracing::info!(host = ?driver.host, wheels = wheels.is_some(), "robot node up");
     let mut feed = LidarFeed::new(cfg.lidar_ip, "robot");
     // Each recent scan's end, its LiDAR's clock, and when its last packet arrived (host clock).
     let mut scan_hosts: VecDeque<(u64, Clock, u64)> = VecDeque::new();
@@ -92,11 +107,28 @@ pub async fn run(
     loop {
         tokio::select! {
             _ = wait_stop(&mut stop) => break,
+            rx = async { match wheel_rx.as_mut() { Some(r) => r.recv().await, None => std::future::pending().await } } => {
+                let (Some((host_ns, frame)), Some(odometry)) = (rx, wheels.as_mut()) else {
+                    // The bus failed (logged where it did) or a replay came to its end.
+                    tracing::info!("the wheels' feed ended: the LIO goes on without them");
+                    wheel_rx = None;
+                    continue;
+                };
+                summary.wheel_frames += 1;
+                if let (Some(r), Some(t_ns)) = (recorder.as_mut(), host_to_lidar.to_lidar(host_ns)) {
+                    r.can_frame(t_ns, &frame);
+                }
+                if let Some(step) = odometry.frame(host_ns, &frame, &host_to_lidar) {
+                    push_wheel(&mut core, &step, lidar_clock(&scan_hosts), recorder.as_mut());
+                }
+            }
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
                 match feed.take(ev, recorder.as_mut()) {
                     Some(Fed::Scan { scan, clock, last_host_ns }) => {
-                        scan_hosts.push_back((scan.end_ns, clock, last_host_ns.unwrap_or_else(host_now_ns)));
+                        let last_host_ns = last_host_ns.unwrap_or_else(host_now_ns);
+                        host_to_lidar.scan(scan.end_ns, last_host_ns);
+                        scan_hosts.push_back((scan.end_ns, clock, last_host_ns));
                         if scan_hosts.len() > 64 {
                             scan_hosts.pop_front();
                         }
@@ -144,6 +176,12 @@ pub async fn run(
                 }
             }
         }
+    }
+    if let Some(task) = wheel_task {
+        task.abort();
+    }
+    if let Some(w) = &wheels {
+        (summary.wheel_twists, summary.wheel_frames_early) = (w.twists, w.early);
     }
     // The last tiles, so a rig that joins after the run still gets the whole map: the map
     // thread hands them over once it has everything.
@@ -203,6 +241,26 @@ async fn finish_tiles(mut task: tokio::task::JoinHandle<(u64, u64)>) -> Option<(
             let _ = task.await;
             None
         }
+    }
+}
+
+/// The clock the newest scan is on (PTP until one has come).
+fn lidar_clock(scans: &VecDeque<(u64, Clock, u64)>) -> Clock {
+    scans.back().map_or(Clock::Ptp, |(_, c, _)| *c)
+}
+
+/// Hands a decoded twist to the LIO and the recording.
+fn push_wheel(core: &mut RobotCore, step: &WheelStep, clock: Clock, recorder: Option<&mut NodeRecorder>) {
+    let tw = step.twist;
+    core.push_wheel(starc_pipeline::lio::WheelSample {
+        t_ns: tw.t_ns,
+        clock,
+        vx_m_s: tw.vx_m_s,
+        vy_m_s: tw.vy_m_s,
+        wz_rad_s: tw.wz_rad_s,
+    });
+    if let Some(r) = recorder {
+        r.wheel_odometry(tw.t_ns, step.pose, [tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s]);
     }
 }
 

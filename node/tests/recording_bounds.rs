@@ -190,3 +190,19 @@ fn kill_9_loses_at_most_the_open_chunk() {
     // The open chunk (at most 1 s of log time) and the few entries in flight to the writer.
     assert!(lost_s <= 1.1, "lost {lost_s:.3} s");
 }
+
+/// A bad entry (a stamp past 2038, which ROS 2 time cannot hold) is skipped; the recording
+/// goes on and finishes with everything else.
+#[test]
+fn an_entry_stamped_past_2038_is_skipped_and_the_recording_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("robot.mcap");
+    let mut rec = NodeRecorder::create(&path, "robot").unwrap();
+    rec.imu(&imu(T0_NS));
+    rec.imu(&imu(u64::MAX - 1));
+    rec.imu(&imu(T0_NS + 5_000_000));
+    rec.finish().unwrap();
+    let all: Vec<u64> =
+        messages(&std::fs::read(&path).unwrap(), ReadMode::Strict).unwrap().map(|m| m.unwrap().log_ns).collect();
+    assert_eq!(all, vec![T0_NS, T0_NS + 5_000_000]);
+}

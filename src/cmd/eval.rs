@@ -298,6 +298,7 @@ fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
         },
         start_gate_m: 2.0,
         view: starc_view::ViewConfig::default(),
+        wheels: !args.no_wheels,
         detect: args.detector.config()?,
     };
     super::sim_live::run(dir, &opts)

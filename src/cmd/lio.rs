@@ -410,7 +410,7 @@ fn run_recording(args: &Args, file: LioFile, cfg: &LioConfig, scan_cfg: &ScanCon
         let m = m.with_context(|| format!("reading {}", args.file.display()))?;
         let Some(input) = recorded(&m, period_ns)? else { continue };
         let name = match &input {
-            Recorded::Imu(d, _) | Recorded::Scan(d, _) => d.clone(),
+            Recorded::Imu(d, _) | Recorded::Scan(d, _) | Recorded::Wheel(d, _) => d.clone(),
         };
         let dev = match devices.entry(name.clone()) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
@@ -421,6 +421,8 @@ fn run_recording(args: &Args, file: LioFile, cfg: &LioConfig, scan_cfg: &ScanCon
         match input {
             Recorded::Imu(_, s) => dev.push_imu(s, &mut outs),
             Recorded::Scan(_, scan) => dev.push_scan(scan, &mut outs)?,
+            // The robot node's wheel odometry: used when the LIO config has `[wheels]`.
+            Recorded::Wheel(_, w) => dev.lio.push_wheel(w),
         }
         dev.record(&mut outs)?;
     }

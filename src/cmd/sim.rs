@@ -168,6 +168,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_gate_m: 2.0,
             view,
             detect: args.detector.config()?,
+            wheels: true,
         };
         super::sim_live::run(&args.out, &opts)?;
     }
@@ -177,9 +178,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The wheel odometry of a `starc sim` run's directory, decoded with the base its
 /// scenario.toml describes.
 pub fn run_wheel_samples(dir: &std::path::Path) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
-    let path = dir.join("scenario.toml");
-    let (scenario, _) = Scenario::load(&path.to_string_lossy())?;
-    wheel_samples(dir, scenario.robot.get_ref())
+    let base = starc_eval::wheels::run_wheel_feedback(dir)?;
+    Ok(starc_eval::wheels::run_wheel_samples(dir, &base)?)
 }
 
 /// The simulated base's wheel odometry from a run's `robot_can.log`, decoded with the
@@ -188,12 +188,6 @@ pub fn wheel_samples(
     dir: &std::path::Path,
     robot: &starc_hil::sim::scenario::Robot,
 ) -> anyhow::Result<Vec<starc_pipeline::lio::WheelSample>> {
-    use starc_bridge::wheels::{read_wheel_log, MotorFeedback, WheelFeedback};
-    use starc_hil::sim::scenario::MotorProtocol;
-    let motors = match robot.motors {
-        MotorProtocol::C620 => MotorFeedback::C620,
-        MotorProtocol::Cia402 => MotorFeedback::Cia402,
-    };
-    let base = WheelFeedback::plain(starc_hil::sim::wheels::default_geometry(robot.wheels), motors);
-    Ok(read_wheel_log(&dir.join("robot_can.log"), &base, 0)?)
+    let base = starc_eval::wheels::sim_wheel_feedback(robot);
+    Ok(starc_eval::wheels::run_wheel_samples(dir, &base)?)
 }

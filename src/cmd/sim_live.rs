@@ -48,6 +48,9 @@ pub struct LiveOptions {
     pub view: starc_view::ViewConfig,
     /// The robot node's person detector.
     pub detect: starc_pipeline::detect::DetectConfig,
+    /// The robot node takes the base's wheels: the run's robot_can.log replayed in real time
+    /// as its bus would carry it.
+    pub wheels: bool,
 }
 
 /// Free loopback ports for the nodes: each socket is held until every port is chosen, so that
@@ -99,6 +102,13 @@ fn link(listen: Option<u16>, connect: Option<u16>) -> anyhow::Result<LinkConfig>
     Ok(LinkConfig::from_toml(&text)?)
 }
 
+/// The time of a `candump -l` log's first frame.
+fn first_log_ns(path: &Path) -> anyhow::Result<u64> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let line = text.lines().find(|l| !l.trim().is_empty()).with_context(|| format!("{} is empty", path.display()))?;
+    Ok(starc_can::candump::parse_line(line)?.t_ns)
+}
+
 /// Runs the nodes on their own thread and runtime.
 fn spawn_node<F, Fut, T>(name: &str, f: F) -> anyhow::Result<std::thread::JoinHandle<starc_node::Result<T>>>
 where
@@ -125,12 +135,21 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
 
     let mut ports = FreePorts::default();
     let (robot_bcast, fpv_bcast, link_port) = (ports.udp()?, ports.udp()?, ports.tcp()?);
-    let robot_cfg = RobotNodeConfig {
+    let wheels = match opts.wheels {
+        true => Some(starc_node::wheels::WheelsConfig {
+            replay: Some(dir.join("robot_can.log")),
+            feedback: Some(starc_eval::wheels::run_wheel_feedback(dir)?),
+            ..Default::default()
+        }),
+        false => None,
+    };
+    let mut robot_cfg = RobotNodeConfig {
         livox: driver(&mut ports, robot_bcast)?,
         lidar_ip: Some(ROBOT_MOCK),
         lio: None,
         detect: opts.detect.clone(),
         map_period_ms: 1000,
+        wheels,
         record: Some(opts.out.join("robot.mcap")),
         record_fsync: false,
         link: link(Some(link_port), None)?,
@@ -169,6 +188,12 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         .enable_all()
         .build()?;
     let w0 = Instant::now() + Duration::from_nanos(super::mock::PLAYBACK_LEAD_NS);
+    if let Some(w) = robot_cfg.wheels.as_mut() {
+        // The log is on the Avias' clock: its frames play on the same timeline as their packets.
+        let first_ns = first_log_ns(&dir.join("robot_can.log"))?;
+        let w0_unix_ns = starc_link::host_now_ns() + super::mock::PLAYBACK_LEAD_NS;
+        w.replay_start_at_unix_ns = Some(w0_unix_ns.saturating_add_signed(first_ns as i64 - s0 as i64));
+    }
     let mut mocks = Vec::new();
     for (sim_ip, mock_ip, bcast) in [(ROBOT_AVIA, ROBOT_MOCK, robot_bcast), (FPV_AVIA, FPV_MOCK, fpv_bcast)] {
         let lead_left = w0.saturating_duration_since(Instant::now()).as_nanos() as u64;
@@ -413,6 +438,7 @@ mod tests {
             start_gate_m: 2.0,
             view: Default::default(),
             detect: Default::default(),
+            wheels: false,
         }
     }
 

@@ -25,7 +25,9 @@ pub use offline::{MissionEvent, OfflineMission};
 pub use overlay::Overlay;
 pub use place::ScanPlacer;
 pub use rig::{AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig};
-pub use rig_side::{DetectionTake, RefusedDetections, RigSide, RigSideConfig, HOLD_NS, MAX_DETECTION_LEAD_NS};
+pub use rig_side::{
+    DetectionTake, RefusedDetections, RigSide, RigSideConfig, HOLD_NS, MAX_DETECTION_AGE_NS, MAX_DETECTION_LEAD_NS,
+};
 pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
 pub use robot_map::{MapScan, RobotMap, RobotMapConfig};
 pub use sent_people::{people_to_draw, people_to_send};

@@ -18,6 +18,11 @@ pub const HOLD_NS: u64 = 1_000_000_000;
 /// after it would be drawn at the wrong time or not at all.
 pub const MAX_DETECTION_LEAD_NS: u64 = 5_000_000_000;
 
+/// A detection stamped more than this before the rig's newest scan is refused: a robot clock
+/// stepped back (or a replayed message) would otherwise fill the overlay with people it never
+/// draws, and the count tells the operator the clocks disagree.
+pub const MAX_DETECTION_AGE_NS: u64 = 5_000_000_000;
+
 /// Detections the rig side refused, by reason.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RefusedDetections {
@@ -25,6 +30,8 @@ pub struct RefusedDetections {
     pub before_first_scan: u64,
     /// Stamped more than [`MAX_DETECTION_LEAD_NS`] past the rig's newest scan.
     pub from_the_future: u64,
+    /// Stamped more than [`MAX_DETECTION_AGE_NS`] before it.
+    pub from_the_past: u64,
 }
 
 /// The rig side's settings.
@@ -63,6 +70,7 @@ pub enum DetectionTake {
     Held,
     RefusedBeforeFirstScan,
     RefusedFromTheFuture,
+    RefusedFromThePast,
 }
 
 impl RigSide {
@@ -126,6 +134,10 @@ impl RigSide {
         if stamp_ns > rig_ns.saturating_add(MAX_DETECTION_LEAD_NS) {
             self.refused.from_the_future += 1;
             return DetectionTake::RefusedFromTheFuture;
+        }
+        if stamp_ns.saturating_add(MAX_DETECTION_AGE_NS) < rig_ns {
+            self.refused.from_the_past += 1;
+            return DetectionTake::RefusedFromThePast;
         }
         self.newest_detection_ns = self.newest_detection_ns.max(stamp_ns);
         self.overlay.push(stamp_ns, people);
@@ -246,7 +258,8 @@ mod tests {
     fn detections_are_judged_by_the_rigs_own_clock() {
         let mut side = side();
         assert_eq!(side.push_detections(1_000 * MS, person()), DetectionTake::RefusedBeforeFirstScan);
-        first_pose(&mut side, 1_500 * MS);
+        // Long enough that a clock stepped back by more than MAX_DETECTION_AGE_NS is still >= 0.
+        first_pose(&mut side, 6_500 * MS);
         let (now_ns, _) = side.core().last().unwrap_or_default();
         // A forged stamp (or a robot clock step) an hour ahead is refused and does not move the
         // frame's time; the real detection after it is held and drawn at its own time.
@@ -260,6 +273,11 @@ mod tests {
         assert_eq!(side.overlay().at(now_ns).len(), 1);
         // Within the allowed lead (clock jitter between the two LiDARs) is held.
         assert_eq!(side.push_detections(now_ns + MAX_DETECTION_LEAD_NS, person()), DetectionTake::Held);
-        assert_eq!(side.refused(), RefusedDetections { before_first_scan: 1, from_the_future: 1 });
+        // A robot clock stepped back 6 s: refused and counted, nothing of it held.
+        let stepped_back = now_ns - 6_000 * MS;
+        assert_eq!(side.push_detections(stepped_back, person()), DetectionTake::RefusedFromThePast);
+        assert_eq!(side.newest_detection_ns(), now_ns + MAX_DETECTION_LEAD_NS);
+        let refused = RefusedDetections { before_first_scan: 1, from_the_future: 1, from_the_past: 1 };
+        assert_eq!(side.refused(), refused);
     }
 }

@@ -40,6 +40,10 @@ pub enum Topic {
     Imu,
     /// `nav_msgs/msg/Odometry`, base in odom.
     Odom,
+    /// `nav_msgs/msg/Odometry`, the base's wheel odometry (base in `wheel_odom`, its twist).
+    WheelOdom,
+    /// `can_msgs/msg/Frame`, the base's feedback frames as the bus carried them.
+    CanRx,
     /// `tf2_msgs/msg/TFMessage`, moving frames.
     Tf,
     /// `tf2_msgs/msg/TFMessage`, extrinsics.
@@ -53,10 +57,12 @@ pub enum Topic {
 }
 
 impl Topic {
-    pub const ALL: [Topic; 8] = [
+    pub const ALL: [Topic; 10] = [
         Topic::Points,
         Topic::Imu,
         Topic::Odom,
+        Topic::WheelOdom,
+        Topic::CanRx,
         Topic::Tf,
         Topic::TfStatic,
         Topic::FpvOdom,
@@ -69,6 +75,8 @@ impl Topic {
             Topic::Points => "/robot/points",
             Topic::Imu => "/robot/imu",
             Topic::Odom => "/robot/odom",
+            Topic::WheelOdom => "/robot/wheel_odom",
+            Topic::CanRx => "/robot/can/rx",
             Topic::Tf => "/tf",
             Topic::TfStatic => "/tf_static",
             Topic::FpvOdom => "/fpv/odom",
@@ -82,7 +90,8 @@ impl Topic {
         match self {
             Topic::Points => msgs::PointCloud2::TYPE_NAME,
             Topic::Imu => msgs::Imu::TYPE_NAME,
-            Topic::Odom | Topic::FpvOdom => msgs::Odometry::TYPE_NAME,
+            Topic::Odom | Topic::FpvOdom | Topic::WheelOdom => msgs::Odometry::TYPE_NAME,
+            Topic::CanRx => msgs::CanFrameMsg::TYPE_NAME,
             Topic::Tf | Topic::TfStatic => msgs::TfMessage::TYPE_NAME,
             Topic::DetectionMarkers => msgs::MarkerArray::TYPE_NAME,
             Topic::ArImage => msgs::CompressedImage::TYPE_NAME,

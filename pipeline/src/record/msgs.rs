@@ -394,6 +394,47 @@ impl RosMessage for CompressedImage {
     const TYPE_NAME: &'static str = "sensor_msgs/msg/CompressedImage";
 }
 
+/// `can_msgs/Frame` (ros2_socketcan's type): one CAN frame as the bus carried it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CanFrameMsg {
+    pub header: Header,
+    /// 11-bit or 29-bit identifier (`is_extended` says which).
+    pub id: u32,
+    pub is_rtr: bool,
+    pub is_extended: bool,
+    pub is_error: bool,
+    pub dlc: u8,
+    pub data: [u8; 8],
+}
+
+impl Cdr for CanFrameMsg {
+    fn encode(&self, w: &mut CdrWriter) {
+        self.header.encode(w);
+        w.u32(self.id);
+        w.bool(self.is_rtr);
+        w.bool(self.is_extended);
+        w.bool(self.is_error);
+        w.u8(self.dlc);
+        for b in self.data {
+            w.u8(b);
+        }
+    }
+    fn decode(r: &mut CdrReader<'_>) -> Result<Self, PipelineError> {
+        let (header, id) = (Header::decode(r)?, r.u32("id")?);
+        let (is_rtr, is_extended, is_error, dlc) =
+            (r.bool("is_rtr")?, r.bool("is_extended")?, r.bool("is_error")?, r.u8("dlc")?);
+        let mut data = [0u8; 8];
+        for b in &mut data {
+            *b = r.u8("data")?;
+        }
+        Ok(Self { header, id, is_rtr, is_extended, is_error, dlc, data })
+    }
+}
+
+impl RosMessage for CanFrameMsg {
+    const TYPE_NAME: &'static str = "can_msgs/msg/Frame";
+}
+
 /// `std_msgs/ColorRGBA`, components in 0..1.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ColorRgba {

@@ -5,7 +5,9 @@
 //! keeping the reason in [`Messages::stopped_by`]. Nothing here panics on bad bytes; the
 //! container is parsed by [`super::scan`].
 
-use super::msgs::{CompressedImage, Imu, MarkerArray, Odometry, PointCloud2, PointField, RosMessage, TfMessage};
+use super::msgs::{
+    CanFrameMsg, CompressedImage, Imu, MarkerArray, Odometry, PointCloud2, PointField, RosMessage, TfMessage,
+};
 use super::scan::{is_finished, Scanner};
 use crate::cloud::{CloudPoint, PointCloud};
 use crate::PipelineError;
@@ -48,6 +50,7 @@ pub enum Decoded {
     Tf(TfMessage),
     MarkerArray(MarkerArray),
     CompressedImage(CompressedImage),
+    CanFrame(CanFrameMsg),
 }
 
 impl RecordedMessage {
@@ -67,6 +70,7 @@ impl RecordedMessage {
             TfMessage::TYPE_NAME => Decoded::Tf(TfMessage::from_cdr(p)?),
             MarkerArray::TYPE_NAME => Decoded::MarkerArray(MarkerArray::from_cdr(p)?),
             CompressedImage::TYPE_NAME => Decoded::CompressedImage(CompressedImage::from_cdr(p)?),
+            CanFrameMsg::TYPE_NAME => Decoded::CanFrame(CanFrameMsg::from_cdr(p)?),
             other => return Err(PipelineError::Unsupported { format: "MCAP", what: format!("message type {other}") }),
         })
     }

@@ -66,6 +66,11 @@ const TYPES: &[(&str, &str, &[&str])] = &[
          geometry_msgs/TwistWithCovariance twist\n",
         &["std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/TwistWithCovariance"],
     ),
+    (
+        "can_msgs/Frame",
+        "std_msgs/Header header\nuint32 id\nbool is_rtr\nbool is_extended\nbool is_error\nuint8 dlc\nuint8[8] data\n",
+        &["std_msgs/Header"],
+    ),
     ("tf2_msgs/TFMessage", "geometry_msgs/TransformStamped[] transforms\n", &["geometry_msgs/TransformStamped"]),
     ("visualization_msgs/UVCoordinate", "float32 u\nfloat32 v\n", &[]),
     ("visualization_msgs/MeshFile", "string filename\nuint8[] data\n", &[]),

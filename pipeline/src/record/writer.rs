@@ -7,8 +7,8 @@
 //! comes first, which bounds the loss in both bytes and seconds.
 
 use super::msgs::{
-    check_cloud, ColorRgba, CompressedImage, Header, Imu, Marker, MarkerArray, Odometry, PointCloud2, PointField, Pose,
-    Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
+    check_cloud, CanFrameMsg, ColorRgba, CompressedImage, Header, Imu, Marker, MarkerArray, Odometry, PointCloud2,
+    PointField, Pose, Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
 };
 use super::sink::{RetrySink, SinkGauge};
 use super::{schema, Topic};
@@ -26,6 +26,8 @@ use std::sync::Arc;
 pub struct Frames {
     pub map: String,
     pub odom: String,
+    /// The frame the wheels' own odometry integrates in (a second `odom`, apart from the LIO's).
+    pub wheel_odom: String,
     pub base: String,
     pub lidar: String,
     pub imu: String,
@@ -37,6 +39,7 @@ impl Default for Frames {
         Self {
             map: "map".into(),
             odom: "odom".into(),
+            wheel_odom: "wheel_odom".into(),
             base: "base_link".into(),
             lidar: "avia".into(),
             imu: "imu_link".into(),
@@ -343,6 +346,27 @@ impl Recorder {
         let frames = self.options.frames.clone();
         let msg = self.odometry_msg(stamp, &frames.odom, &frames.base, pose, linear_m_s, angular_rad_s)?;
         self.write(Topic::Odom.name(), stamp.ns, &msg)
+    }
+
+    /// The base's wheel odometry on `/robot/wheel_odom`: the base in the `wheel_odom` frame
+    /// (the wheels' own integration), twist in the base frame (linear m/s, angular rad/s).
+    pub fn wheel_odometry(
+        &mut self,
+        stamp: Stamp,
+        pose: Pose,
+        linear_m_s: [f64; 3],
+        angular_rad_s: [f64; 3],
+    ) -> Result<(), PipelineError> {
+        let frames = self.options.frames.clone();
+        let msg = self.odometry_msg(stamp, &frames.wheel_odom, &frames.base, pose, linear_m_s, angular_rad_s)?;
+        self.write(Topic::WheelOdom.name(), stamp.ns, &msg)
+    }
+
+    /// One CAN frame the base's bus carried (its feedback), on `/robot/can/rx` as
+    /// `can_msgs/Frame`; `frame_id` empty, as ros2_socketcan leaves it.
+    pub fn can_frame(&mut self, stamp: Stamp, frame: &CanFrameMsg) -> Result<(), PipelineError> {
+        let msg = CanFrameMsg { header: self.header(stamp, "")?, ..frame.clone() };
+        self.write(Topic::CanRx.name(), stamp.ns, &msg)
     }
 
     /// The viewer's (FPV headset or camera) pose on `/fpv/odom`, in the map frame.
