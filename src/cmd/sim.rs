@@ -51,6 +51,16 @@ pub struct Args {
     /// Write every Nth camera frame's AR view as PNG (0: none).
     #[arg(long, default_value_t = 5)]
     frames_every: u64,
+    /// Live mission: give the rig node a start hint from the simulator's truth, its true start
+    /// moved this far (m) and turned `--start-hint-deg`, and refuse first alignments more than
+    /// `--start-gate-m` from it (as an operator's marked entry would). Default: no hint, the
+    /// rig searches the whole map, as in a scored run.
+    #[arg(long)]
+    start_hint_m: Option<f64>,
+    #[arg(long, default_value_t = 20.0)]
+    start_hint_deg: f64,
+    #[arg(long, default_value_t = 2.0)]
+    start_gate_m: f64,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,
 }
@@ -152,9 +162,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             dir: args.out.clone(),
             out: None,
             frames_every: args.frames_every,
-            start_hint_m: Some(1.0),
-            start_hint_deg: 20.0,
-            start_gate_m: 2.0,
+            start_hint_m: args.start_hint_m,
+            start_hint_deg: args.start_hint_deg,
+            start_gate_m: args.start_gate_m,
             no_coverage: false,
             walker_min_height_m: None,
             no_wheels: false,
@@ -164,8 +174,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let opts = super::sim_live::LiveOptions {
             out: args.out.join("mission"),
             frames_every: args.frames_every,
-            start_hint: Some((1.0, 20.0)),
-            start_gate_m: 2.0,
+            start_hint: args.start_hint_m.map(|m| (m, args.start_hint_deg)),
+            start_gate_m: args.start_gate_m,
             view,
             detect: args.detector.config()?,
             wheels: true,
