@@ -39,7 +39,7 @@ pub use map::{
 pub use register::{
     yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, SeedOrigin, WeakDirection,
 };
-pub use rejection::{AlignFailure, Reasons, Rejection};
+pub use rejection::{slide_words, AlignFailure, Reasons, Rejection};
 pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]

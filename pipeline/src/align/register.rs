@@ -961,7 +961,11 @@ impl Aligner {
             why.push(Rejection::NotSettled { update_norm: m.update_norm, max: c.max_update_norm });
         }
         if !at_most(c.min_degeneracy_index, m.degeneracy_index) {
-            why.push(Rejection::Degenerate { index: m.degeneracy_index, min: c.min_degeneracy_index });
+            why.push(Rejection::Degenerate {
+                index: m.degeneracy_index,
+                min: c.min_degeneracy_index,
+                slide: weakest_slide(m),
+            });
         }
         why
     }
@@ -1020,6 +1024,20 @@ fn metrics_of(r: &icp::IcpResult) -> AlignMetrics {
         degeneracy_index: r.degeneracy_index,
         correspondences: r.correspondences,
     }
+}
+
+/// Share of the weakest direction's (unit) eigenvector that must be translation for it to be
+/// named a slide rather than a turn.
+const SLIDE_MIN_TRANSLATION_SHARE: f64 = 0.7;
+
+/// The weakest direction of a result, in the source's frame, when it is mostly a translation.
+fn weakest_slide(m: &AlignMetrics) -> Option<[f64; 3]> {
+    let h = nalgebra::Matrix6::from_fn(|i, j| m.information[i][j]);
+    let eigen = nalgebra::SymmetricEigen::new(h);
+    let k = eigen.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?.0;
+    let v = eigen.eigenvectors.column(k);
+    let slide = Vec3::new(v[3], v[4], v[5]);
+    (slide.norm() >= SLIDE_MIN_TRANSLATION_SHARE).then(|| slide.normalize()).map(|d| [d.x, d.y, d.z])
 }
 
 /// `a <= b`, false when either is NaN (so a NaN metric fails its acceptance test).

@@ -20,8 +20,10 @@ pub enum Rejection {
     InlierRatio { ratio: f64, min: f64 },
     /// ICP had not settled (its last update too large).
     NotSettled { update_norm: f64, max: f64 },
-    /// The result leaves a direction unconstrained (degeneracy index too small).
-    Degenerate { index: f64, min: f64 },
+    /// The result leaves a direction unconstrained (degeneracy index too small); `slide` is
+    /// that direction in the source's (the rig's LiDAR) frame when it is mostly a translation
+    /// (a corridor's axis), `None` when it is mostly a turn.
+    Degenerate { index: f64, min: f64, slide: Option<[f64; 3]> },
     /// Degenerate, and what it explains does not pin it: it explains too little of the source
     /// to be judged by its slides.
     NotPinnedExplains { share: f64, asked: f64 },
@@ -57,7 +59,13 @@ impl fmt::Display for Rejection {
             }
             Self::InlierRatio { ratio, min } => write!(f, "inlier ratio {ratio:.3} < {min}"),
             Self::NotSettled { update_norm, max } => write!(f, "update norm {update_norm:.2e} > {max:.0e}"),
-            Self::Degenerate { index, min } => write!(f, "degeneracy index {index:.2e} < {min:.0e}"),
+            Self::Degenerate { index, min, slide } => {
+                write!(f, "degeneracy index {index:.2e} < {min:.0e}")?;
+                match slide {
+                    Some(d) => write!(f, " (it slides {})", slide_words(d)),
+                    None => write!(f, " (it turns)"),
+                }
+            }
             Self::NotPinnedExplains { share, asked } => {
                 write!(f, "not pinned: explains {share:.3} of the source ({asked} asked)")
             }
@@ -82,6 +90,18 @@ impl fmt::Display for Rejection {
                 max_ratio * 100.0
             ),
         }
+    }
+}
+
+/// A direction in the Avia's frame (x forward, y left, z up) in words, by its largest part.
+pub fn slide_words(d: &[f64; 3]) -> &'static str {
+    let [x, y, z] = d.map(f64::abs);
+    if x >= y && x >= z {
+        "forward/back"
+    } else if y >= z {
+        "left/right"
+    } else {
+        "up/down"
     }
 }
 

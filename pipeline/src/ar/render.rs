@@ -142,11 +142,14 @@ fn clip_near(a: Vector3<f64>, b: Vector3<f64>) -> Option<(Vector3<f64>, Vector3<
     }
 }
 
-/// The status line across the top: alignment, detection age, link, free text.
+/// The status line across the top: alignment, detection age, link; free text (what an
+/// unaligned rig waits for) on a second line, so the frame's width does not cut it off.
 fn draw_status(frame: &mut ArFrame, status: &ArStatus, cfg: &RenderConfig) {
     let scale = status_scale(frame.width);
     let pad = 2 * scale;
-    frame.fill_rect(0, 0, frame.width, GLYPH_H * scale + 2 * pad, COLOUR_BAR);
+    let line_h = GLYPH_H * scale + pad;
+    let lines = if status.text.is_empty() { 1 } else { 2 };
+    frame.fill_rect(0, 0, frame.width, lines * line_h + pad, COLOUR_BAR);
     let (label, colour) =
         if status.aligned { ("ALIGNED", COLOUR_ALIGNED) } else { ("NOT ALIGNED - PEOPLE HIDDEN", COLOUR_NOT_ALIGNED) };
     let x = draw_text(frame, pad, pad, scale, colour, label);
@@ -155,12 +158,10 @@ fn draw_status(frame: &mut ArFrame, status: &ArStatus, cfg: &RenderConfig) {
         Some(ms) => format!("  DET {ms:.0} MS"),
         None => "  DET --".to_string(),
     };
-    let mut rest = format!("{age}  LINK {}", status.link);
+    draw_text(frame, x, pad, scale, COLOUR_TEXT, &format!("{age}  LINK {}", status.link));
     if !status.text.is_empty() {
-        rest.push_str("  ");
-        rest.push_str(&status.text);
+        draw_text(frame, pad, pad + line_h, scale, COLOUR_TEXT, &status.text);
     }
-    draw_text(frame, x, pad, scale, COLOUR_TEXT, &rest);
 }
 
 /// Font scale of the status line: 2 on frames at least 400 px wide, else 1.

@@ -172,7 +172,9 @@ fn status_line_shows_its_fields() {
     let cam = CameraModel::default();
     let cfg = RenderConfig::default();
     let text_px = [225, 225, 225];
-    let bar = |frame: &ArFrame| -> Vec<u8> { frame.rgb[..640 * 22 * 3].to_vec() };
+    // One line of 22 rows; free text goes on a second line (40 rows).
+    let rows = |status: &ArStatus| if status.text.is_empty() { 22 } else { 40 };
+    let bar = |frame: &ArFrame, rows: usize| -> Vec<u8> { frame.rgb[..640 * rows * 3].to_vec() };
     let base = render(&cam, &camera_pose(), &[], &[], &aligned(), &cfg);
     // "ALIGNED" in green, the rest in light grey.
     assert!(count(&base, [60, 220, 90]) > 100);
@@ -186,8 +188,9 @@ fn status_line_shows_its_fields() {
     ];
     for status in variants {
         let other = render(&cam, &camera_pose(), &[], &[], &status, &cfg);
-        assert_ne!(bar(&other), bar(&base), "{status:?}");
-        assert_eq!(other.rgb[640 * 22 * 3..], base.rgb[640 * 22 * 3..]);
+        let rows = rows(&status);
+        assert_ne!(bar(&other, rows), bar(&base, rows), "{status:?}");
+        assert_eq!(other.rgb[640 * rows * 3..], base.rgb[640 * rows * 3..]);
     }
 }
 

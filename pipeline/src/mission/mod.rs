@@ -19,6 +19,7 @@ mod rig_side;
 mod robot;
 mod robot_map;
 mod sent_people;
+mod waiting;
 
 pub use input::{MissionInput, Side};
 pub use offline::{MissionEvent, OfflineMission};
@@ -31,6 +32,7 @@ pub use rig_side::{
 pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
 pub use robot_map::{MapScan, RobotMap, RobotMapConfig};
 pub use sent_people::{people_to_draw, people_to_send};
+pub use waiting::Waiting;
 
 use crate::ar::{self, ArFrame, ArPerson, ArStatus, CameraModel, RenderConfig};
 use nalgebra::{Isometry3, Vector3};
@@ -73,7 +75,7 @@ pub fn render_view(
         aligned,
         detection_age_ms,
         link: link.to_string(),
-        text: if aligned { String::new() } else { "waiting for the first alignment".into() },
+        text: if aligned { String::new() } else { rig.waiting().to_string() },
     };
     let frame = ar::render(camera, &world_t_camera, &rig_points, &people, &status, cfg);
     View { frame, aligned, world_t_camera, people, detection_age_ms }

@@ -7,6 +7,7 @@
 //! [`RigCore::apply`].
 
 use super::place::{ScanPlacer, ScanPoses};
+use super::waiting::Waiting;
 use crate::align::{
     filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
     PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
@@ -265,6 +266,8 @@ pub struct RigCore {
     /// Re-registrations refused in a row for contradicting the map, and alignments dropped.
     contradicted_in_row: u32,
     pub lost: usize,
+    /// What the last refused registration before a world pose said (see [`Self::waiting`]).
+    last_refusal: Option<Waiting>,
 }
 
 impl RigCore {
@@ -291,6 +294,7 @@ impl RigCore {
             accepted: 0,
             contradicted_in_row: 0,
             lost: 0,
+            last_refusal: None,
             cfg,
         })
     }
@@ -403,6 +407,15 @@ impl RigCore {
         self.world.correction().is_some()
     }
 
+    /// What the rig waits for while it has no world pose: the map, the first registration, or
+    /// what the last refused one lacked (for the status line).
+    pub fn waiting(&self) -> Waiting {
+        if self.map_raw_len <= self.cfg.min_map_points {
+            return Waiting::Map;
+        }
+        self.last_refusal.unwrap_or(Waiting::FirstAttempt)
+    }
+
     /// Whether a registration is due by time (the caller then hands over the newest map).
     pub fn wants_map(&self) -> bool {
         let (Some((end_ns, _)), Some(first)) = (self.placer.last(), self.first_ns) else { return false };
@@ -480,6 +493,9 @@ impl RigCore {
     /// A refused registration; a re-registration refused for contradicting the map counts
     /// towards dropping the alignment.
     fn refused(&mut self, tracking: bool, failure: AlignFailure) -> AlignVerdict {
+        if !self.aligned() {
+            self.last_refusal = Some(Waiting::from_failure(&failure));
+        }
         let contradicts = failure
             .because()
             .iter()
@@ -619,7 +635,7 @@ mod tests {
             because: vec![r],
         };
         let contradicted = || failure(Rejection::Contradicted { ratio: 0.8, min: 0.96, contradicted: 300 });
-        let degenerate = failure(Rejection::Degenerate { index: 0.001, min: 0.02 });
+        let degenerate = failure(Rejection::Degenerate { index: 0.001, min: 0.02, slide: None });
         // Two contradictions, then a refusal that says nothing against the alignment: the count
         // starts over.
         assert!(matches!(rig.refused(true, contradicted()), AlignVerdict::Refused(_)));

@@ -1,0 +1,87 @@
+//! What a rig that is not placed in the robot's map yet is waiting for, in words an operator
+//! can act on: the status line of the AR view says it.
+
+use crate::align::{slide_words, AlignFailure, Rejection};
+use std::fmt;
+
+/// Why the rig has no world pose yet, from its last refused registration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Waiting {
+    /// The robot's map has not arrived, or is too small to align to.
+    Map,
+    /// No registration has run yet.
+    FirstAttempt,
+    /// The robot has mapped too little of what the rig sees (`share` of the view explained).
+    Overlap { share: f64 },
+    /// The view leaves a direction free (a corridor): it slides along `slide` (the rig's frame),
+    /// or turns (`None`).
+    Constraint { slide: Option<[f64; 3]> },
+    /// Refused for other reasons (an ambiguous or poor fit): the search goes on.
+    Search,
+}
+
+impl Waiting {
+    /// What the last refused registration says the rig waits for.
+    pub fn from_failure(failure: &AlignFailure) -> Self {
+        let because = failure.because();
+        if let Some(share) = because.iter().find_map(|r| match r {
+            Rejection::TooLittleOverlap { share, .. } => Some(*share),
+            _ => None,
+        }) {
+            return Self::Overlap { share };
+        }
+        let slide = because.iter().find_map(|r| match r {
+            Rejection::Degenerate { slide, .. } => Some(*slide),
+            _ => None,
+        });
+        let unpinned = because
+            .iter()
+            .any(|r| matches!(r, Rejection::NotPinnedExplains { .. } | Rejection::NotPinnedSlides { .. }));
+        match (slide, unpinned) {
+            (Some(slide), _) => Self::Constraint { slide },
+            (None, true) => Self::Constraint { slide: None },
+            _ if because.is_empty() => Self::FirstAttempt,
+            _ => Self::Search,
+        }
+    }
+}
+
+impl fmt::Display for Waiting {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Map => f.write_str("waiting for the robot's map"),
+            Self::FirstAttempt => f.write_str("aligning to the robot's map"),
+            Self::Overlap { share } => {
+                write!(f, "map covers {:.0} % of view: go where the robot went", share * 100.0)
+            }
+            Self::Constraint { slide: Some(d) } => write!(f, "view slides {}: face a corner", slide_words(d)),
+            Self::Constraint { slide: None } => f.write_str("view does not pin the pose: look around"),
+            Self::Search => f.write_str("searching the robot's map"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn refused(because: Vec<Rejection>) -> AlignFailure {
+        AlignFailure::NoneAccepted { attempts: 3, seeds: 12, best_seed_yaw_deg: 0.0, because }
+    }
+
+    #[test]
+    fn the_operator_is_told_what_to_do() {
+        let corridor = refused(vec![Rejection::Degenerate { index: 1e-4, min: 0.02, slide: Some([0.98, 0.1, 0.0]) }]);
+        let w = Waiting::from_failure(&corridor);
+        assert_eq!(w, Waiting::Constraint { slide: Some([0.98, 0.1, 0.0]) });
+        assert!(w.to_string().contains("slides forward/back"), "{w}");
+        let unmapped = refused(vec![
+            Rejection::TooLittleOverlap { share: 0.12, min: 0.3 },
+            Rejection::Degenerate { index: 1e-4, min: 0.02, slide: None },
+        ]);
+        assert!(Waiting::from_failure(&unmapped).to_string().contains("12 %"));
+        let ambiguous = refused(vec![Rejection::Residual { rms_m: 0.2, max_m: 0.05 }]);
+        assert_eq!(Waiting::from_failure(&ambiguous), Waiting::Search);
+        assert_eq!(Waiting::from_failure(&AlignFailure::NoAttempt), Waiting::FirstAttempt);
+    }
+}
