@@ -9,44 +9,21 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{fast, free_port, open_listening, wait_for, wait_up};
+use common::{fast, free_port, open_listening, python, root, wait_for, wait_up, Reap};
 use starc_link::certs::{make_certs, CertFiles};
 use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkState, Received, Role, TlsConfig};
 use starc_time::{Clock, Stamp};
 
+/// One test at a time: the flood saturates both cores, and a link beside it would go stale for
+/// want of CPU, not because of anything the attacker did.
+static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// The hostile peer's forged detections are numbered from here (zenoh_hostile.py).
 const FORGED_SEQ: u32 = 1_000_000;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// `.venv/bin/python` with eclipse-zenoh, or why not (a failure in CI).
-fn python() -> Option<PathBuf> {
-    let python = root().join("../.venv/bin/python");
-    let ok = python.exists()
-        && Command::new(&python).args(["-c", "import zenoh"]).output().is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(python);
-    }
-    assert!(std::env::var_os("CI").is_none(), "eclipse-zenoh missing from .venv: run .ci/run's install step");
-    println!("skipped: .venv has no eclipse-zenoh");
-    None
-}
-
-/// Kills the peer if the test fails before it exits.
-struct Reap(Child);
-
-impl Drop for Reap {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 /// What the hostile peer reports (one flat JSON line of counts).
 struct Report(String);
@@ -175,6 +152,7 @@ fn rss_bytes() -> u64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn python_peers_without_a_certificate_or_on_plain_tcp_get_nothing_from_a_mutual_tls_robot() {
+    let _serial = ONE_AT_A_TIME.lock().await;
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let (robot, mut rig, port, files) = robot_and_rig(dir.path()).await;
@@ -236,6 +214,7 @@ async fn flood(python: &Path, port: u16, files: &CertFiles, robot: &LinkNode) ->
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_python_peer_with_the_rig_certificate_flooding_beyond_its_role_leaves_the_robot_bounded() {
+    let _serial = ONE_AT_A_TIME.lock().await;
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let (robot, mut rig, port, files) = robot_and_rig(dir.path()).await;
@@ -288,6 +267,7 @@ async fn a_python_peer_with_the_rig_certificate_flooding_beyond_its_role_leaves_
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_python_peer_posing_as_the_robot_with_the_rig_certificate_never_brings_a_rig_up() {
+    let _serial = ONE_AT_A_TIME.lock().await;
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let files = make_certs(&dir.path().join("certs"), &["127.0.0.1".into()], false).unwrap();

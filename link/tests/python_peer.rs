@@ -5,40 +5,12 @@
 
 mod common;
 
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::{open_listening, robot_cfg, wait_up};
+use common::{open_listening, python, robot_cfg, root, wait_up, Reap};
 use starc_link::{LinkMessage, Role};
 use starc_pipeline::link::decode;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// `.venv/bin/python` with eclipse-zenoh, or why not (a failure in CI).
-fn python() -> Option<PathBuf> {
-    let python = root().join("../.venv/bin/python");
-    let ok = python.exists()
-        && Command::new(&python).args(["-c", "import zenoh"]).output().is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(python);
-    }
-    assert!(std::env::var_os("CI").is_none(), "eclipse-zenoh missing from .venv: run .ci/run's install step");
-    println!("skipped: .venv has no eclipse-zenoh");
-    None
-}
-
-/// Kills the peer if the test fails before it exits.
-struct Reap(Child);
-
-impl Drop for Reap {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn python_zenoh_peer_reads_our_heartbeats_and_sends_its_own() {

@@ -1,6 +1,8 @@
 //! Shared by the link tests: loopback-only configs with short timings, free ports, bounded waits.
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
 
+use std::path::PathBuf;
+use std::process::{Child, Command};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
@@ -94,4 +96,32 @@ pub async fn collect(node: &mut LinkNode, limit: Duration, done: impl Fn(&[Recei
         }
     }
     got
+}
+
+/// The link crate's folder (its tests/peers scripts are under it).
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `.venv/bin/python` with eclipse-zenoh, or why not (a failure in CI).
+pub fn python() -> Option<PathBuf> {
+    let python = root().join("../.venv/bin/python");
+    let ok = python.exists()
+        && Command::new(&python).args(["-c", "import zenoh"]).output().is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(python);
+    }
+    assert!(std::env::var_os("CI").is_none(), "eclipse-zenoh missing from .venv: run .ci/run's install step");
+    println!("skipped: .venv has no eclipse-zenoh");
+    None
+}
+
+/// Kills a peer process if the test fails before it exits.
+pub struct Reap(pub Child);
+
+impl Drop for Reap {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }

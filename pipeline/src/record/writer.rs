@@ -343,9 +343,8 @@ impl Recorder {
         linear_m_s: [f64; 3],
         angular_rad_s: [f64; 3],
     ) -> Result<(), PipelineError> {
-        let frames = self.options.frames.clone();
-        let msg = self.odometry_msg(stamp, &frames.odom, &frames.base, pose, linear_m_s, angular_rad_s)?;
-        self.write(Topic::Odom.name(), stamp.ns, &msg)
+        let odom = self.options.frames.odom.clone();
+        self.base_odometry(Topic::Odom, &odom, stamp, pose, [linear_m_s, angular_rad_s])
     }
 
     /// The base's wheel odometry on `/robot/wheel_odom`: the base in the `wheel_odom` frame
@@ -357,9 +356,22 @@ impl Recorder {
         linear_m_s: [f64; 3],
         angular_rad_s: [f64; 3],
     ) -> Result<(), PipelineError> {
-        let frames = self.options.frames.clone();
-        let msg = self.odometry_msg(stamp, &frames.wheel_odom, &frames.base, pose, linear_m_s, angular_rad_s)?;
-        self.write(Topic::WheelOdom.name(), stamp.ns, &msg)
+        let wheel_odom = self.options.frames.wheel_odom.clone();
+        self.base_odometry(Topic::WheelOdom, &wheel_odom, stamp, pose, [linear_m_s, angular_rad_s])
+    }
+
+    /// The base frame's odometry in `frame` on `topic`; `twist` is (linear m/s, angular rad/s).
+    fn base_odometry(
+        &mut self,
+        topic: Topic,
+        frame: &str,
+        stamp: Stamp,
+        pose: Pose,
+        twist: [[f64; 3]; 2],
+    ) -> Result<(), PipelineError> {
+        let base = self.options.frames.base.clone();
+        let msg = self.odometry_msg(stamp, frame, &base, pose, twist[0], twist[1])?;
+        self.write(topic.name(), stamp.ns, &msg)
     }
 
     /// One CAN frame the base's bus carried (its feedback), on `/robot/can/rx` as
