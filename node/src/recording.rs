@@ -132,16 +132,20 @@ impl NodeRecorder {
 
     /// Queues `entry` after any feedback batched before it.
     fn send(&mut self, entry: Entry) {
-        if !self.wheels.is_empty() {
-            let batch = std::mem::take(&mut self.wheels);
-            self.queue(Entry::Wheels(batch));
-        }
+        self.flush_wheels();
         self.queue(entry);
     }
 
     fn batch(&mut self, item: Wheel) {
         self.wheels.push(item);
         if self.wheels.len() >= WHEEL_BATCH {
+            self.flush_wheels();
+        }
+    }
+
+    /// The batched feedback as one entry, if any.
+    fn flush_wheels(&mut self) {
+        if !self.wheels.is_empty() {
             let batch = std::mem::take(&mut self.wheels);
             self.queue(Entry::Wheels(batch));
         }
@@ -256,10 +260,7 @@ impl NodeRecorder {
     }
 
     fn close(&mut self, wait: Duration) -> Result<()> {
-        if !self.wheels.is_empty() {
-            let batch = std::mem::take(&mut self.wheels);
-            self.queue(Entry::Wheels(batch));
-        }
+        self.flush_wheels();
         self.tx = None;
         let Some(done) = self.done.take() else { return Ok(()) };
         match done.recv_timeout(wait) {

@@ -115,10 +115,15 @@ pub async fn run(
                     continue;
                 };
                 summary.wheel_frames += 1;
-                if let (Some(r), Some(t_ns)) = (recorder.as_mut(), host_to_lidar.to_lidar(host_ns)) {
+                // Before the first scan there is no LiDAR time to put the frame at.
+                let Some(t_ns) = host_to_lidar.to_lidar(host_ns) else {
+                    summary.wheel_frames_early += 1;
+                    continue;
+                };
+                if let Some(r) = recorder.as_mut() {
                     r.can_frame(t_ns, &frame);
                 }
-                if let Some(step) = odometry.frame(host_ns, &frame, &host_to_lidar) {
+                if let Some(step) = odometry.frame(t_ns, &frame) {
                     push_wheel(&mut core, &step, lidar_clock(&scan_hosts), recorder.as_mut());
                 }
             }
@@ -180,9 +185,7 @@ pub async fn run(
     if let Some(task) = wheel_task {
         task.abort();
     }
-    if let Some(w) = &wheels {
-        (summary.wheel_twists, summary.wheel_frames_early) = (w.twists, w.early);
-    }
+    summary.wheel_twists = wheels.as_ref().map_or(0, |w| w.twists);
     // The last tiles, so a rig that joins after the run still gets the whole map: the map
     // thread hands them over once it has everything.
     for placed in core.take_unmapped() {
@@ -192,7 +195,7 @@ pub async fn run(
     if let Err(e) = map_thread.join().map_err(|_| NodeError::Thread("the map thread panicked")).and_then(|r| r) {
         tracing::warn!("the map: {e}");
     }
-    (summary.tiles_sent, summary.tiles_superseded) = (0, tiles.superseded());
+    summary.tiles_superseded = tiles.superseded();
     match finish_tiles(tile_task).await {
         Some((sent, errors)) => {
             summary.tiles_sent = sent;

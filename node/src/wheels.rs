@@ -156,14 +156,12 @@ impl HostToLidar {
     }
 }
 
-/// The base's feedback as the LIO takes it: decoded twists on the LiDAR clock, and the pose the
-/// wheels alone integrate (for the recording's `/robot/wheel_odom`).
+/// The base's feedback as the LIO takes it: decoded twists, and the pose the wheels alone
+/// integrate (for the recording's `/robot/wheel_odom`).
 pub struct WheelOdometry {
     decoder: WheelDecoder,
     pose: (f64, f64, f64),
     last_ns: Option<u64>,
-    /// Frames and twists heard before the first scan (no clock mapping yet): not used.
-    pub early: u64,
     pub twists: u64,
 }
 
@@ -177,15 +175,12 @@ pub struct WheelStep {
 impl WheelOdometry {
     pub fn new(feedback: &WheelFeedback) -> Result<Self> {
         let decoder = WheelDecoder::new(feedback).map_err(|e| NodeError::Config(format!("[wheels]: {e}")))?;
-        Ok(Self { decoder, pose: (0.0, 0.0, 0.0), last_ns: None, early: 0, twists: 0 })
+        Ok(Self { decoder, pose: (0.0, 0.0, 0.0), last_ns: None, twists: 0 })
     }
 
-    /// A frame received at `host_ns`; the twist once its cycle is complete, on the LiDAR clock.
-    pub fn frame(&mut self, host_ns: u64, frame: &CanFrame, clock: &HostToLidar) -> Option<WheelStep> {
-        let Some(t_ns) = clock.to_lidar(host_ns) else {
-            self.early += 1;
-            return None;
-        };
+    /// A frame received at `t_ns` on the LiDAR clock ([`HostToLidar`]); the twist once its
+    /// cycle is complete.
+    pub fn frame(&mut self, t_ns: u64, frame: &CanFrame) -> Option<WheelStep> {
         let twist = self.decoder.push(t_ns, frame)?;
         if let Some(last) = self.last_ns {
             let dt = twist.t_ns.saturating_sub(last) as f64 * 1e-9;
@@ -228,21 +223,17 @@ mod tests {
             KinematicsConfig::Omni3 { wheel_radius_m: 0.05, center_to_wheel_m: 0.2, wheel_angles_deg: None };
         let feedback = WheelFeedback::plain(kinematics, MotorFeedback::C620);
         let mut odo = WheelOdometry::new(&feedback).unwrap();
-        let mut clock = HostToLidar::default();
         let frame = |esc: u16, rpm: i16| {
             let mut d = [0u8; 8];
             d[2..4].copy_from_slice(&rpm.to_be_bytes());
             CanFrame::standard(0x200 + esc, &d).unwrap()
         };
-        assert!(odo.frame(0, &frame(1, 0), &clock).is_none());
-        assert_eq!(odo.early, 1);
-        clock.scan(1_000, 1_000);
         let wheels = feedback.wheels.len() as u16;
         let mut steps = Vec::new();
         for cycle in 0..3u64 {
             for esc in 1..=wheels {
-                let host_ns = 2_000 + cycle * 10_000_000 + u64::from(esc);
-                steps.extend(odo.frame(host_ns, &frame(esc, 0), &clock));
+                let t_ns = 2_000 + cycle * 10_000_000 + u64::from(esc);
+                steps.extend(odo.frame(t_ns, &frame(esc, 0)));
             }
         }
         assert_eq!(steps.len(), 3);
