@@ -12,7 +12,7 @@ use crate::error::{NodeError, Result};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Role};
 use starc_livox::live::LivoxDriver;
 use starc_pipeline::mission::{
-    people_to_send, MapScan, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotMapConfig, RobotStep,
+    people_to_send, MapScan, RobotCore, RobotCoreConfig, RobotDetection, RobotMap, RobotStep,
 };
 use starc_time::{Clock, Stamp};
 use std::collections::VecDeque;
@@ -77,8 +77,9 @@ pub async fn run(
         None => RobotCoreConfig::robot_lio(),
     };
     let core_cfg = RobotCoreConfig { lio, detect: cfg.detect.clone(), ..RobotCoreConfig::default() };
-    // The link carries no coverage yet, so the node does not walk rays for it.
-    let map = RobotMap::new(RobotMapConfig { coverage_ray_stride: 0, ..core_cfg.map_config() })?;
+    // The map thread walks a sample of the rays for the coverage, which the tiles carry to the
+    // rig (format 2): it judges its registrations by their overlap with what the robot saw.
+    let map = RobotMap::new(core_cfg.map_config())?;
     let mut core = RobotCore::new(core_cfg)?;
     let period = Duration::from_millis(cfg.map_period_ms.max(10));
     let tiles = Arc::new(LatestTiles::default());

@@ -6,7 +6,7 @@
 //! passes.
 
 use super::geometry::Vec3;
-use crate::voxel_hash::{key_of, KeyMap};
+use crate::voxel_hash::{key_of, Key, KeyMap};
 use serde::Serialize;
 
 /// A ray is walked this many voxels short of its end: the surface it hit, its noise, and the
@@ -46,6 +46,12 @@ impl Coverage {
     /// Walks the ray from `origin` to `end` (both in the world), counting each voxel it crosses
     /// once; non-finite rays are skipped.
     pub fn add_ray(&mut self, origin: &Vec3, end: &Vec3) {
+        self.add_ray_noting(origin, end, 0, &mut Vec::new());
+    }
+
+    /// [`Self::add_ray`], noting in `reached` each voxel whose count comes to `min` (0: none):
+    /// what changed for a reader that only asks "crossed at least `min` times?".
+    pub fn add_ray_noting(&mut self, origin: &Vec3, end: &Vec3, min: u16, reached: &mut Vec<Key>) {
         if !(origin.iter().chain(end.iter()).all(|v| v.is_finite())) {
             return;
         }
@@ -63,9 +69,22 @@ impl Coverage {
             if last != Some(key) {
                 let n = self.crossed.entry(key).or_insert(0);
                 *n = n.saturating_add(1);
+                if min > 0 && *n == min {
+                    reached.push(key);
+                }
                 last = Some(key);
             }
         }
+    }
+
+    /// Rays that crossed voxel `key`.
+    pub fn crossings_of(&self, key: &Key) -> u16 {
+        self.crossed.get(key).copied().unwrap_or(0)
+    }
+
+    /// Sets the count of voxel `key` (a coverage rebuilt from what the robot sent).
+    pub fn set_crossings(&mut self, key: Key, crossings: u16) {
+        self.crossed.insert(key, crossings);
     }
 
     /// Rays that crossed the voxel of `p`.

@@ -40,7 +40,7 @@ pub use register::{
     yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, SeedOrigin, WeakDirection,
 };
 pub use rejection::{slide_words, AlignFailure, Reasons, Rejection};
-pub use tiles::{decode_tile, encode_tiles, Tile, TileMap, MAX_TILE_POINTS};
+pub use tiles::{decode_tile, encode_tile, encode_tiles, Tile, TileCoverage, TileMap, MAX_TILE_POINTS};
 
 #[cfg(test)]
 mod tests;

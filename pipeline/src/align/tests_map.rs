@@ -172,3 +172,59 @@ fn damaged_tiles_are_typed_errors() {
     assert!(encode_tiles(&pts, &[None, None], 0.0, 0.01, 1).is_err());
     assert!(encode_tiles(&pts, &[None, None], 1000.0, 0.001, 1).is_err());
 }
+
+#[test]
+fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
+    use crate::align::{encode_tile, Coverage};
+    let mut cov = Coverage::new(0.25);
+    // Rays along +x at y 0.6 from x -1 (tile -1) into tile 0; and one ray only once, at y 2.1.
+    for _ in 0..2 {
+        cov.add_ray(&Vec3::new(-1.0, 0.6, 1.1), &Vec3::new(3.0, 0.6, 1.1));
+    }
+    cov.add_ray(&Vec3::new(0.1, 2.1, 1.1), &Vec3::new(3.0, 2.1, 1.1));
+    let pts = vec![Vec3::new(3.0, 0.6, 1.1)];
+    let good = encode_tile((0, 0, 0), &pts, &[None], 4.0, 0.01, 3, Some((&cov, 2))).unwrap();
+    assert_eq!(good.len(), 32 + 10 + 8 + 512 + 4, "16^3 voxels: 512 bytes");
+    let t = decode_tile(&good).unwrap();
+    let c = t.coverage.clone().unwrap();
+    assert_eq!((c.min_crossings, c.voxel_m), (2, 0.25));
+    // The tile holds x 0..4: the twice-crossed voxels from 0 to 2.5 m (the ray's last 0.5 m is
+    // not free), none of the once-crossed ones.
+    assert_eq!(c.voxels.len(), 11, "{:?}", c.voxels);
+    assert!(c.voxels.iter().all(|v| v.1 == 2 && v.2 == 4 && (0..=10).contains(&v.0)), "{:?}", c.voxels);
+    let mut map = TileMap::default();
+    map.apply(&good).unwrap();
+    let rebuilt = map.coverage().unwrap();
+    assert_eq!(rebuilt.crossings(&Vec3::new(1.0, 0.6, 1.1)), 2);
+    assert_eq!(rebuilt.crossings(&Vec3::new(1.0, 2.1, 1.1)), 0);
+    assert_eq!(rebuilt.crossings(&Vec3::new(-0.5, 0.6, 1.1)), 0, "another tile's");
+    // A negative tile keys its voxels below zero.
+    let neg = decode_tile(&encode_tile((-1, 0, 0), &[], &[], 4.0, 0.01, 3, Some((&cov, 2))).unwrap()).unwrap();
+    assert_eq!(neg.coverage.unwrap().voxels.len(), 4, "x -1 to 0");
+    // Truncations and bit flips are errors; so are pad bits or sizes that do not tile, even
+    // under a right CRC.
+    for n in 0..good.len() {
+        assert!(decode_tile(&good[..n]).is_err(), "truncated to {n}");
+    }
+    for i in (0..good.len()).step_by(7) {
+        let mut b = good.clone();
+        b[i] ^= 0x10;
+        assert!(decode_tile(&b).is_err(), "byte {i}");
+    }
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+    let resealed = |mut b: Vec<u8>| {
+        let n = b.len() - 4;
+        let sum = crc.checksum(&b[..n]);
+        b[n..].copy_from_slice(&sum.to_le_bytes());
+        b
+    };
+    let mut voxel = good.clone();
+    voxel[42..44].copy_from_slice(&300u16.to_le_bytes());
+    assert!(decode_tile(&resealed(voxel)).is_err(), "4 m is no whole number of 0.3 m voxels");
+    let mut odd = encode_tile((0, 0, 0), &[], &[], 0.75, 0.01, 1, Some((&Coverage::new(0.25), 1))).unwrap();
+    assert!(decode_tile(&odd).is_ok());
+    let pad = odd.len() - 5;
+    odd[pad] |= 0x80;
+    assert!(decode_tile(&resealed(odd)).is_err(), "27 voxels: the pad bits must be 0");
+    assert!(encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&Coverage::new(0.3), 2))).is_err());
+}

@@ -166,6 +166,9 @@ impl RigSide {
         if let MapFeed::Tiles { tiles, changed } = &mut self.map {
             if *changed && self.core.wants_map() {
                 self.core.set_map(tiles.points().0);
+                if let Some(coverage) = tiles.coverage() {
+                    self.core.set_coverage(std::sync::Arc::new(coverage));
+                }
                 *changed = false;
             }
         }

@@ -59,6 +59,9 @@ pub struct RobotCoreConfig {
 /// covers a room within a few scans.
 pub const COVERAGE_VOXEL_M: f64 = 0.25;
 pub const COVERAGE_RAY_STRIDE: usize = 16;
+/// The tiles carry voxels crossed this often: the rig's `overlap_min_crossings` (a voxel crossed
+/// once may be a grazing ray's).
+pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
 /// The base's ground point in the Avia IMU's frame: the Avia 0.45 m above the floor, level, over
@@ -91,6 +94,7 @@ impl RobotCoreConfig {
             tile_step_m: self.tile_step_m,
             coverage_voxel_m: COVERAGE_VOXEL_M,
             coverage_ray_stride: COVERAGE_RAY_STRIDE,
+            tile_coverage_min_crossings: COVERAGE_MIN_CROSSINGS,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::{encode_tiles, Coverage};
+use crate::align::{encode_tile, Coverage};
 use crate::detect::WindowPoint;
 use crate::voxel_hash::key_of;
 use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
@@ -28,6 +28,9 @@ pub struct RobotMapConfig {
     /// `coverage_ray_stride`-th point's ray (0: no coverage).
     pub coverage_voxel_m: f64,
     pub coverage_ray_stride: usize,
+    /// Tiles carry the coverage's voxels crossed at least this many times (format 2; 0: tiles
+    /// carry surfaces only). The tile edge must then be a whole number of coverage voxels.
+    pub tile_coverage_min_crossings: u16,
     /// Edge and quantization of the tiles.
     pub tile_edge_m: f64,
     pub tile_step_m: f64,
@@ -51,6 +54,14 @@ impl RobotMap {
                 reason: "map_voxel_m and tile_edge_m must be positive, tiles larger than voxels".into(),
             });
         }
+        let per_edge = cfg.tile_edge_m / cfg.coverage_voxel_m;
+        let whole = (per_edge - per_edge.round()).abs() < 1e-6 && (1.0..=64.0).contains(&per_edge.round());
+        if cfg.tile_coverage_min_crossings > 0 && !(cfg.coverage_ray_stride > 0 && whole) {
+            return Err(PipelineError::BadFile {
+                format: "robot config",
+                reason: "coverage in tiles needs rays and a tile edge of 1 to 64 whole coverage voxels".into(),
+            });
+        }
         Ok(Self {
             cfg,
             voxels: VoxelHashSet::default(),
@@ -68,9 +79,16 @@ impl RobotMap {
         if self.cfg.coverage_ray_stride == 0 {
             return;
         }
+        let min = self.cfg.tile_coverage_min_crossings;
         let coverage = Arc::make_mut(&mut self.coverage);
+        let mut reached = Vec::new();
         for p in scan.points.iter().step_by(self.cfg.coverage_ray_stride) {
-            coverage.add_ray(&scan.origin_m, &p.xyz());
+            coverage.add_ray_noting(&scan.origin_m, &p.xyz(), min, &mut reached);
+        }
+        // A voxel that came to the crossings the tiles carry changes its tile.
+        let per_tile = (self.cfg.tile_edge_m / self.cfg.coverage_voxel_m).round().max(1.0) as i32;
+        for v in reached {
+            self.dirty_tiles.insert((v.0.div_euclid(per_tile), v.1.div_euclid(per_tile), v.2.div_euclid(per_tile)));
         }
     }
 
@@ -118,13 +136,21 @@ impl RobotMap {
             return Ok(Vec::new());
         }
         let per_tile = self.voxels_per_tile();
-        let dirty = std::mem::take(&mut self.dirty_tiles);
-        let points: Vec<Vector3<f64>> = dirty.iter().filter_map(|t| self.tiles.get(t)).flatten().copied().collect();
+        let mut dirty: Vec<VoxelKey> = std::mem::take(&mut self.dirty_tiles).into_iter().collect();
+        dirty.sort_unstable();
         self.tile_version = self.tile_version.wrapping_add(1);
         let edge_m = f64::from(per_tile) * self.cfg.voxel_m;
-        let normals = vec![None; points.len()];
-        let tiles = encode_tiles(&points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version)?;
-        Ok(tiles.into_iter().map(|(_, bytes)| bytes).collect())
+        let min = self.cfg.tile_coverage_min_crossings;
+        let coverage = (min > 0).then_some((self.coverage.as_ref(), min));
+        let none = Vec::new();
+        dirty
+            .into_iter()
+            .map(|key| {
+                let points = self.tiles.get(&key).unwrap_or(&none);
+                let normals = vec![None; points.len()];
+                encode_tile(key, points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version, coverage)
+            })
+            .collect()
     }
 }
 
@@ -146,6 +172,7 @@ mod tests {
             tile_step_m: 0.01,
             coverage_voxel_m: 0.25,
             coverage_ray_stride: 0,
+            tile_coverage_min_crossings: 0,
         };
         let mut map = RobotMap::new(cfg).unwrap();
         // 0.01 m apart over 2 m: 20 voxels of 0.1 m, one tile of 4 m.
@@ -177,7 +204,55 @@ mod tests {
             tile_step_m: 0.01,
             coverage_voxel_m: 0.25,
             coverage_ray_stride: 0,
+            tile_coverage_min_crossings: 0,
         })
         .is_err());
+        // Coverage in tiles needs tiles of whole coverage voxels.
+        assert!(RobotMap::new(RobotMapConfig {
+            voxel_m: 0.1,
+            tile_edge_m: 4.0,
+            tile_step_m: 0.01,
+            coverage_voxel_m: 0.3,
+            coverage_ray_stride: 16,
+            tile_coverage_min_crossings: 2,
+        })
+        .is_err());
+    }
+
+    #[test]
+    fn tiles_carry_the_space_the_rays_crossed_to_the_rig() {
+        let cfg = RobotMapConfig {
+            voxel_m: 0.1,
+            tile_edge_m: 4.0,
+            tile_step_m: 0.01,
+            coverage_voxel_m: 0.25,
+            coverage_ray_stride: 1,
+            tile_coverage_min_crossings: 2,
+        };
+        let mut map = RobotMap::new(cfg).unwrap();
+        // A wall 6 m ahead along +x, seen from the origin: the rays cross two tiles of 4 m
+        // before it (the second tile holds the wall).
+        let wall: Vec<WindowPoint> =
+            (0..20).map(|i| WindowPoint { x_m: 6.0, y_m: 0.5 + i as f32 * 0.01, z_m: 1.0, t_ns: 0 }).collect();
+        let scan = MapScan { origin_m: Vector3::new(0.1, 0.5, 1.0), points: Arc::new(wall) };
+        map.add_scan(&scan);
+        let tiles = map.take_changed_tiles().unwrap();
+        assert_eq!(tiles.len(), 2, "the wall's tile and the empty one before it");
+        let mut rig = TileMap::default();
+        for t in &tiles {
+            rig.apply(t).unwrap();
+        }
+        let seen = rig.coverage().unwrap();
+        let robot = map.coverage();
+        // Every voxel the robot's rays crossed twice or more, and only those, reach the rig.
+        for x in 0..30 {
+            let p = Vector3::new(f64::from(x) * 0.25 + 0.1, 0.5, 1.0);
+            assert_eq!(seen.crossings(&p) >= 2, robot.crossings(&p) >= 2, "{p:?}");
+        }
+        assert!(seen.crossings(&Vector3::new(3.0, 0.5, 1.0)) >= 2);
+        assert_eq!(seen.crossings(&Vector3::new(5.9, 0.5, 1.0)), 0, "not the wall");
+        // The same scan again reaches no new voxel: nothing to send.
+        map.add_scan(&scan);
+        assert!(map.take_changed_tiles().unwrap().is_empty());
     }
 }
