@@ -10,7 +10,7 @@ use std::process::Command;
 fn the_mission_aligns_the_rig_and_writes_its_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_starc"))
-        .args(["sim", "lab", "--duration", "12", "--offline", "--out"])
+        .args(["sim", "lab", "--duration", "20", "--offline", "--out"])
         .arg(dir.path())
         .output()
         .unwrap();
@@ -39,7 +39,8 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
         assert!(report.pointer(key).is_some(), "report.json lacks {key}: {report}");
     }
     let first = report.pointer("/alignment/first_accepted_after_s").and_then(|v| v.as_f64());
-    assert!(first.is_some_and(|t| t < 6.0), "the rig is aligned within 6 s: {report}");
+    // The first search's fit is applied once the searches of the next 3 s found it again.
+    assert!(first.is_some_and(|t| (6.0..15.0).contains(&t)), "the rig is aligned after 6 s and within 15 s: {report}");
     let err = report.pointer("/alignment/first_error_m").and_then(|v| v.as_f64()).unwrap();
     assert!(err < 0.1, "first alignment {err} m off");
     let p50 = report.pointer("/rig_pose_error/translation_m/p50").and_then(|v| v.as_f64()).unwrap();

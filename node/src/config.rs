@@ -116,6 +116,11 @@ pub struct FpvNodeConfig {
     /// `start_gate_m = inf`): no gate, any first alignment is taken.
     #[serde(default = "default_start_gate_m")]
     pub start_gate_m: f64,
+    /// A first alignment is applied once independent searches have found it again, without a
+    /// refusal between them, over this long (s; 0: the first accepted one at once). One window
+    /// can fit a room like another; that rarely survives the next seconds (docs/align.md).
+    #[serde(default = "default_confirm_first_s")]
+    pub confirm_first_s: f64,
     /// Both LiDARs on one PTP clock (the robot's grandmaster): detections are placed in time by
     /// their LiDAR stamps. False: through the hosts' clocks and the link's offset estimate.
     #[serde(default = "yes")]
@@ -152,6 +157,10 @@ fn yes() -> bool {
 
 fn default_start_gate_m() -> f64 {
     2.0
+}
+
+fn default_confirm_first_s() -> f64 {
+    3.0
 }
 
 fn default_record_frames_every() -> u64 {
@@ -225,12 +234,18 @@ impl RobotNodeConfig {
 
 impl FpvNodeConfig {
     /// What the types let through but the node cannot use: a start gate that is not a positive
-    /// distance or `inf` (no gate).
+    /// distance or `inf` (no gate), a confirmation time that is not 0 to 600 s.
     pub fn validate(&self) -> Result<()> {
         if self.start_gate_m.is_nan() || self.start_gate_m <= 0.0 {
             return Err(NodeError::Config(format!(
                 "start_gate_m must be a positive distance, or inf for no gate (got {})",
                 self.start_gate_m
+            )));
+        }
+        if !(self.confirm_first_s.is_finite() && (0.0..=600.0).contains(&self.confirm_first_s)) {
+            return Err(NodeError::Config(format!(
+                "confirm_first_s must be 0 to 600 seconds (got {})",
+                self.confirm_first_s
             )));
         }
         Ok(())

@@ -192,6 +192,7 @@ fn side_config(cfg: &FpvNodeConfig) -> Result<RigSideConfig> {
         core: RigCoreConfig {
             lio: lio_config(cfg.lio.as_deref())?,
             start_gate_m: cfg.start_gate_m,
+            confirm_span_ns: (cfg.confirm_first_s * 1e9).round() as u64,
             ..RigCoreConfig::default()
         },
         camera,

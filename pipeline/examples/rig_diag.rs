@@ -2,7 +2,9 @@
 //! truth: `cargo run --release -p starc-pipeline --example rig_diag -- DIR [hint_m hint_deg]`.
 //! Runs the offline mission's robot and rig cores in time order (as `starc mission` does) and
 //! prints, per attempt, every full attempt's result against the truth, the start gate, and a
-//! single attempt from the true pose.
+//! single attempt from the true pose. Environment: `NO_HINT=1` (no start hint, as scored runs),
+//! `NEVER_APPLY=1` (every search a first alignment), `ALIGN_TOML=file` (the search's settings),
+//! `DUMP_DIR=dir` (each search's window, map and truth for scripts/align_window_peers.py).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
@@ -41,7 +43,13 @@ fn main() {
 
     let mut rc = RobotCore::new(RobotCoreConfig::default()).unwrap();
     let max_window_s: f64 = std::env::var("MAX_WINDOW_S").map_or(10.0, |v| v.parse().unwrap());
+    // ALIGN_TOML=file: the first alignment's settings from that file (an `[align]`-style table).
+    let align = std::env::var("ALIGN_TOML").map_or_else(
+        |_| RigCoreConfig::default().align,
+        |p| toml::from_str::<AlignConfig>(&std::fs::read_to_string(p).unwrap()).unwrap(),
+    );
     let mut core = RigCore::new(RigCoreConfig {
+        align,
         start_gate_m: gate_m,
         max_first_window_ns: (max_window_s * 1e9) as u64,
         ..RigCoreConfig::default()
@@ -86,7 +94,30 @@ fn main() {
             let truth = l_t_w * pose_at(&gt_fpv, end).unwrap();
             let t_s = (end - first) as f64 * 1e-9;
             let truth_job = job.clone();
+            // DUMP_DIR=dir: each search's inputs for the peers (scripts/align_window_peers.py):
+            // the window in its frame, the robot's map, the true pose of the frame.
+            let dump = std::env::var("DUMP_DIR").ok().map(|d| {
+                let name = dir.file_name().map_or("run".into(), |n| n.to_string_lossy().into_owned());
+                let out = PathBuf::from(d).join(format!("{name}_t{t_s:04.1}"));
+                std::fs::create_dir_all(&out).unwrap();
+                let inputs = job.inputs();
+                write_f64(&out.join("source.f64"), &inputs.source);
+                write_f64(&out.join("target.f64"), &inputs.target);
+                let m = (truth * inputs.frame_t_lidar.inverse()).to_homogeneous();
+                let rows: Vec<String> =
+                    (0..4).flat_map(|r| (0..4).map(move |c| (r, c))).map(|(r, c)| m[(r, c)].to_string()).collect();
+                std::fs::write(out.join("truth.txt"), rows.join(" ") + "\n").unwrap();
+                out
+            });
             let o = job.run().unwrap();
+            if let Some(out) = &dump {
+                let (m, deg) = pose_error(&o.world_t_lidar, &truth);
+                let ours = format!(
+                    "{{\"accepted\": {}, \"error_m\": {m}, \"error_deg\": {deg}, \"ms\": {}}}\n",
+                    o.report.accepted, o.report.total_ms
+                );
+                std::fs::write(out.join("ours.json"), ours).unwrap();
+            }
             // The pose the attempt claims for the rig at its first scan (what the hint is about).
             let o_first = odom.first().map(|p| p.1).unwrap();
             let o_end = odom.iter().rev().find(|p| p.0 <= end).map(|p| p.1).unwrap();
@@ -203,6 +234,12 @@ fn main() {
             println!("  verdict {verdict:?} (chosen {chosen_m:.2} m {chosen_deg:.1} deg off truth)");
         }
     }
+}
+
+/// Little-endian f64 x, y, z triples (the peers' input format, tests/peers/align_peers.py).
+fn write_f64(path: &std::path::Path, pts: &[nalgebra::Vector3<f64>]) {
+    let bytes: Vec<u8> = pts.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f64::to_le_bytes).collect();
+    std::fs::write(path, bytes).unwrap();
 }
 
 /// An attempt's fit: RMS residual, inlier ratio, last update, degeneracy index, and the share

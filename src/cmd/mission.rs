@@ -42,6 +42,10 @@ pub struct Args {
     pub start_hint_deg: f64,
     #[arg(long, default_value_t = 2.0)]
     pub start_gate_m: f64,
+    /// Apply the rig's first alignment once searches have found it again over this long (s;
+    /// 0: the first accepted one at once, as before 2026-11-27).
+    #[arg(long, default_value_t = starc_eval::offline::CONFIRM_FIRST_S)]
+    pub confirm_first_s: f64,
     /// Draw a walker only from this height above the floor up (the robot core's
     /// `walker_min_height_m`, 0.8 by default; 0 draws their legs too).
     #[arg(long)]
@@ -73,6 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => Start::Anywhere,
         },
         start_gate_m: args.start_gate_m,
+        confirm_first_s: args.confirm_first_s,
         coverage: !args.no_coverage,
         robot: RobotCoreConfig {
             walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),

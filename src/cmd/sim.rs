@@ -61,6 +61,10 @@ pub struct Args {
     start_hint_deg: f64,
     #[arg(long, default_value_t = 2.0)]
     start_gate_m: f64,
+    /// Apply the rig's first alignment once searches have found it again over this long (s;
+    /// 0: the first accepted one at once).
+    #[arg(long, default_value_t = starc_eval::offline::CONFIRM_FIRST_S)]
+    confirm_first_s: f64,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,
 }
@@ -165,6 +169,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             start_hint_m: args.start_hint_m,
             start_hint_deg: args.start_hint_deg,
             start_gate_m: args.start_gate_m,
+            confirm_first_s: args.confirm_first_s,
             no_coverage: false,
             walker_min_height_m: None,
             no_wheels: false,
@@ -176,6 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frames_every: args.frames_every,
             start_hint: args.start_hint_m.map(|m| (m, args.start_hint_deg)),
             start_gate_m: args.start_gate_m,
+            confirm_first_s: args.confirm_first_s,
             view,
             detect: args.detector.config()?,
             wheels: true,

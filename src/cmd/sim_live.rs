@@ -44,6 +44,8 @@ pub struct LiveOptions {
     pub start_hint: Option<(f64, f64)>,
     /// With a hint: a first alignment farther than this from it is refused.
     pub start_gate_m: f64,
+    /// The rig node's `confirm_first_s`.
+    pub confirm_first_s: f64,
     /// The rig node's live views (browser, Foxglove) while the mission runs.
     pub view: starc_view::ViewConfig,
     /// The robot node's person detector.
@@ -168,6 +170,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         },
         expected_start,
         start_gate_m,
+        confirm_first_s: opts.confirm_first_s,
         shared_lidar_clock: true,
         view: opts.view.clone(),
         record: Some(opts.out.join("fpv.mcap")),
@@ -436,6 +439,7 @@ mod tests {
             frames_every: 0,
             start_hint,
             start_gate_m: 2.0,
+            confirm_first_s: 3.0,
             view: Default::default(),
             detect: Default::default(),
             wheels: false,

@@ -52,6 +52,17 @@ pub struct RigCoreConfig {
     /// where the robot saw through, rays through its surfaces) mean the alignment was wrong:
     /// the rig is placed nowhere again and searches from scratch (0: never).
     pub lose_after_contradictions: u32,
+    /// A first alignment is a candidate until independent searches (every `retry_ns`, each on
+    /// the rig's whole window so far) have found it again, without a refusal between them, over
+    /// at least this long; then it is applied (0: the first accepted search is applied at once).
+    /// A single attempt from the candidate would not do: it passes the tests wherever the window
+    /// fits well enough, and a wrong candidate mostly does; it must stay the search's best.
+    /// One window can fit a place it is not (a room like another, a flipped symmetric hall):
+    /// such a coincidence rarely survives the rig's next metres.
+    pub confirm_span_ns: u64,
+    /// Two searches agree when they place the rig's odometry frame within this of each other.
+    pub confirm_agree_m: f64,
+    pub confirm_agree_deg: f64,
 }
 
 impl Default for RigCoreConfig {
@@ -80,6 +91,9 @@ impl Default for RigCoreConfig {
             min_map_points: 1000,
             start_gate_m: 2.0,
             lose_after_contradictions: 3,
+            confirm_span_ns: 3_000_000_000,
+            confirm_agree_m: 0.3,
+            confirm_agree_deg: 3.0,
         }
     }
 }
@@ -114,6 +128,26 @@ pub struct AlignJob {
     guess_world_t_lidar: Isometry3<f64>,
 }
 
+/// What a job registers (see [`AlignJob::inputs`]).
+pub struct AlignInputs {
+    /// The window's points in its frame.
+    pub source: Vec<Vector3<f64>>,
+    /// The registered frame to the rig's LiDAR at the job's end (as
+    /// [`AlignOutcome::frame_t_lidar`]).
+    pub frame_t_lidar: Isometry3<f64>,
+    /// The robot's map.
+    pub target: Arc<Vec<Vector3<f64>>>,
+}
+
+/// A job's window, ready to register.
+struct PreparedWindow {
+    source: Vec<Vector3<f64>>,
+    rays: Vec<Ray>,
+    /// The window's frame in the rig's odometry.
+    frame: Isometry3<f64>,
+    kept: AggregateStats,
+}
+
 /// A job's result.
 pub struct AlignOutcome {
     pub end_ns: u64,
@@ -139,7 +173,10 @@ impl AlignJob {
         self
     }
 
-    pub fn run(self) -> Result<AlignOutcome, PipelineError> {
+    /// The window as the registration takes it: its points (moving points and people left out,
+    /// reduced) and a sample of its rays, in the window's frame; that frame in the rig's
+    /// odometry; what the aggregation kept.
+    fn source(&self) -> PreparedWindow {
         // The window in a gravity-aligned frame at the rig; both sides reduced alike, so that a
         // surface weighs the same in the window as in the map (thinning one side's floor and
         // ceiling alone biases the fit along them: see docs/align.md).
@@ -154,6 +191,21 @@ impl AlignJob {
                 end: (inv * Point3::from(r.end)).coords,
             })
             .collect();
+        PreparedWindow { source, rays, frame, kept }
+    }
+
+    /// The registration's inputs, for peers and diagnosis.
+    pub fn inputs(&self) -> AlignInputs {
+        let w = self.source();
+        AlignInputs {
+            source: w.source,
+            frame_t_lidar: w.frame.inverse() * self.lidar_pose,
+            target: Arc::clone(&self.target),
+        }
+    }
+
+    pub fn run(self) -> Result<AlignOutcome, PipelineError> {
+        let PreparedWindow { source, rays, frame, kept } = self.source();
         tracing::debug!(
             end_ns = self.end_ns,
             points_in = kept.points_in,
@@ -222,6 +274,13 @@ pub enum AlignVerdict {
     /// A re-registration refused for contradicting the map, the last of
     /// `lose_after_contradictions` in a row: the alignment is dropped and the search starts over.
     Lost(AlignFailure),
+    /// Passed its tests, and is a candidate until more searches agree (`searches` so far, over
+    /// `span_ns` of `needed_ns`).
+    Candidate {
+        searches: u32,
+        span_ns: u64,
+        needed_ns: u64,
+    },
     /// Passed its tests, but puts the rig's start (its first odometry pose, carried by the
     /// odometry to the registered pose) `off_m` from the expected start.
     FarFromStart {
@@ -237,6 +296,12 @@ impl std::fmt::Display for AlignVerdict {
             Self::Refused(why) => write!(f, "refused: {why}"),
             Self::Lost(why) => write!(f, "lost: the map contradicts the alignment again ({why}); searching anew"),
             Self::Failed { error } => write!(f, "failed: {error}"),
+            Self::Candidate { searches, span_ns, needed_ns } => write!(
+                f,
+                "candidate: {searches} search(es) agree over {:.1} of {:.1} s",
+                *span_ns as f64 * 1e-9,
+                *needed_ns as f64 * 1e-9
+            ),
             Self::FarFromStart { off_m } => write!(f, "refused: {off_m:.2} m from the expected start"),
         }
     }
@@ -268,6 +333,16 @@ pub struct RigCore {
     pub lost: usize,
     /// What the last refused registration before a world pose said (see [`Self::waiting`]).
     last_refusal: Option<Waiting>,
+    /// The first alignment waiting for confirmation.
+    candidate: Option<Candidate>,
+}
+
+/// A first alignment that passed its tests, waiting for later searches to agree.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    first_end_ns: u64,
+    world_t_odom: Isometry3<f64>,
+    searches: u32,
 }
 
 impl RigCore {
@@ -295,6 +370,7 @@ impl RigCore {
             contradicted_in_row: 0,
             lost: 0,
             last_refusal: None,
+            candidate: None,
             cfg,
         })
     }
@@ -480,7 +556,14 @@ impl RigCore {
         if let (true, Some(hint)) = (first, &self.start_hint) {
             let off_m = start_offset_m(&o.world_t_lidar, &o.odom_t_lidar, &self.first_pose, hint);
             if off_m > self.cfg.start_gate_m {
+                self.candidate = None;
                 return AlignVerdict::FarFromStart { off_m };
+            }
+        }
+        if first {
+            let world_t_odom = o.world_t_lidar * o.odom_t_lidar.inverse();
+            if let Some(pending) = self.confirm(o.end_ns, world_t_odom) {
+                return pending;
             }
         }
         if let Err(e) = self.world.push_registration(o.end_ns, o.world_t_lidar) {
@@ -490,11 +573,39 @@ impl RigCore {
         AlignVerdict::Accepted { first }
     }
 
+    /// A first alignment that passed its tests joins the candidate it agrees with (or starts a
+    /// new one); `None` once the agreeing searches span `confirm_span_ns`, else the verdict.
+    fn confirm(&mut self, end_ns: u64, world_t_odom: Isometry3<f64>) -> Option<AlignVerdict> {
+        let needed_ns = self.cfg.confirm_span_ns;
+        if needed_ns == 0 {
+            return None;
+        }
+        let agrees = |c: &Candidate| {
+            let (m, deg) = crate::align::pose_error(&c.world_t_odom, &world_t_odom);
+            m <= self.cfg.confirm_agree_m && deg <= self.cfg.confirm_agree_deg
+        };
+        let c = match self.candidate {
+            Some(c) if agrees(&c) => Candidate { world_t_odom, searches: c.searches + 1, ..c },
+            _ => Candidate { first_end_ns: end_ns, world_t_odom, searches: 1 },
+        };
+        let span_ns = end_ns.saturating_sub(c.first_end_ns);
+        if span_ns >= needed_ns {
+            self.candidate = None;
+            return None;
+        }
+        self.candidate = Some(c);
+        let verdict = AlignVerdict::Candidate { searches: c.searches, span_ns, needed_ns };
+        self.last_refusal = Some(Waiting::Confirming { searches: c.searches });
+        Some(verdict)
+    }
+
     /// A refused registration; a re-registration refused for contradicting the map counts
     /// towards dropping the alignment.
     fn refused(&mut self, tracking: bool, failure: AlignFailure) -> AlignVerdict {
         if !self.aligned() {
             self.last_refusal = Some(Waiting::from_failure(&failure));
+            // A candidate must be found by every search until confirmed.
+            self.candidate = None;
         }
         let contradicts = failure
             .because()
@@ -648,6 +759,44 @@ mod tests {
         assert!(!rig.aligned() && rig.lost == 1, "placed nowhere again");
         // Refusals of a search (not tracking) never count.
         assert!(matches!(rig.refused(false, contradicted()), AlignVerdict::Refused(_)));
+    }
+
+    #[test]
+    fn a_first_alignment_waits_until_searches_agree_over_the_span() {
+        use super::AlignVerdict;
+        use crate::align::{AlignFailure, Rejection};
+        let s = 1_000_000_000;
+        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        let here = pose_xyz_yaw(4.0, 2.0, 0.0, 30.0);
+        let flipped = pose_xyz_yaw(9.0, 2.0, 0.0, -150.0);
+        let candidate = |v: Option<AlignVerdict>| match v {
+            Some(AlignVerdict::Candidate { searches, .. }) => searches,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(candidate(rig.confirm(3 * s, here)), 1);
+        // Within 0.3 m and 3 deg: the same candidate.
+        assert_eq!(candidate(rig.confirm(4 * s, pose_xyz_yaw(4.1, 2.1, 0.0, 31.0))), 2);
+        // Elsewhere: a new candidate, counted from now.
+        assert_eq!(candidate(rig.confirm(5 * s, flipped)), 1);
+        assert_eq!(candidate(rig.confirm(6 * s, here)), 1);
+        assert_eq!(candidate(rig.confirm(7 * s, here)), 2);
+        // A refused search between them starts over.
+        let refused = AlignFailure::NoneAccepted {
+            attempts: 3,
+            seeds: 12,
+            best_seed_yaw_deg: 0.0,
+            because: vec![Rejection::Residual { rms_m: 0.2, max_m: 0.1 }],
+        };
+        assert!(matches!(rig.refused(false, refused), AlignVerdict::Refused(_)));
+        assert_eq!(candidate(rig.confirm(8 * s, here)), 1);
+        assert_eq!(candidate(rig.confirm(9 * s, here)), 2);
+        assert_eq!(candidate(rig.confirm(10 * s, here)), 3);
+        rig.set_map(vec![Vector3::zeros(); 1001]);
+        assert_eq!(rig.waiting(), super::Waiting::Confirming { searches: 3 });
+        // 3 s after the first: applied.
+        assert!(rig.confirm(11 * s, here).is_none());
+        let mut at_once = RigCore::new(RigCoreConfig { confirm_span_ns: 0, ..RigCoreConfig::default() }).unwrap();
+        assert!(at_once.confirm(3 * s, flipped).is_none(), "0: the first is applied");
     }
 
     #[test]

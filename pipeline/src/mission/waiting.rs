@@ -18,6 +18,8 @@ pub enum Waiting {
     Constraint { slide: Option<[f64; 3]> },
     /// Refused for other reasons (an ambiguous or poor fit): the search goes on.
     Search,
+    /// A fit passed; `searches` searches agree on it so far, and more must before it is used.
+    Confirming { searches: u32 },
 }
 
 impl Waiting {
@@ -57,6 +59,7 @@ impl fmt::Display for Waiting {
             Self::Constraint { slide: Some(d) } => write!(f, "view slides {}: face a corner", slide_words(d)),
             Self::Constraint { slide: None } => f.write_str("view does not pin the pose: look around"),
             Self::Search => f.write_str("searching the robot's map"),
+            Self::Confirming { searches } => write!(f, "found a fit ({searches}x): confirming, keep moving"),
         }
     }
 }
