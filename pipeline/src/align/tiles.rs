@@ -75,6 +75,20 @@ fn bad(reason: impl Into<String>) -> PipelineError {
     PipelineError::BadFile { format: "map tile", reason: reason.into() }
 }
 
+/// The tile edge (cm) and quantization step (mm) the format holds for `edge_m` and `step_m`,
+/// when it can hold them.
+fn tile_sizes(edge_m: f64, step_m: f64) -> Result<(f64, f64), PipelineError> {
+    let edge_cm = (edge_m * 100.0).round();
+    let step_mm = (step_m * 1000.0).round();
+    if !(1.0..=10_000.0).contains(&edge_cm) || !(1.0..=1000.0).contains(&step_mm) {
+        return Err(bad(format!("tile edge {edge_m} m or step {step_m} m out of range")));
+    }
+    if (edge_cm / 100.0) / (step_mm / 1000.0) > f64::from(u16::MAX) {
+        return Err(bad(format!("a {edge_m} m tile at {step_m} m steps does not fit u16 coordinates")));
+    }
+    Ok((edge_cm, step_mm))
+}
+
 /// Cuts `points` (with `normals`, same length) into tiles of `edge_m` at `step_m` quantization,
 /// each encoded with `version`. Tiles come out sorted by key.
 pub fn encode_tiles(
@@ -84,15 +98,8 @@ pub fn encode_tiles(
     step_m: f64,
     version: u32,
 ) -> Result<Vec<(Key, Vec<u8>)>, PipelineError> {
-    let edge_cm = (edge_m * 100.0).round();
-    let step_mm = (step_m * 1000.0).round();
-    if !(1.0..=10_000.0).contains(&edge_cm) || !(1.0..=1000.0).contains(&step_mm) {
-        return Err(bad(format!("tile edge {edge_m} m or step {step_m} m out of range")));
-    }
-    let (edge_m, step_m) = (edge_cm / 100.0, step_mm / 1000.0);
-    if edge_m / step_m > f64::from(u16::MAX) {
-        return Err(bad(format!("a {edge_m} m tile at {step_m} m steps does not fit u16 coordinates")));
-    }
+    let (edge_cm, _) = tile_sizes(edge_m, step_m)?;
+    let edge_m = edge_cm / 100.0;
     let inv = 1.0 / edge_m;
     let mut tiles: KeyMap<Vec<usize>> = KeyMap::default();
     for (i, p) in points.iter().enumerate() {
@@ -124,15 +131,8 @@ pub fn encode_tile(
     version: u32,
     coverage: Option<(&Coverage, u16)>,
 ) -> Result<Vec<u8>, PipelineError> {
-    let edge_cm = (edge_m * 100.0).round();
-    let step_mm = (step_m * 1000.0).round();
-    if !(1.0..=10_000.0).contains(&edge_cm) || !(1.0..=1000.0).contains(&step_mm) {
-        return Err(bad(format!("tile edge {edge_m} m or step {step_m} m out of range")));
-    }
+    let (edge_cm, step_mm) = tile_sizes(edge_m, step_m)?;
     let (edge_m, step_m) = (edge_cm / 100.0, step_mm / 1000.0);
-    if edge_m / step_m > f64::from(u16::MAX) {
-        return Err(bad(format!("a {edge_m} m tile at {step_m} m steps does not fit u16 coordinates")));
-    }
     if points.len() > MAX_TILE_POINTS as usize {
         return Err(bad(format!("tile {key:?} holds {} points (at most {MAX_TILE_POINTS})", points.len())));
     }
