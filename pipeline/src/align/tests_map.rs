@@ -228,3 +228,21 @@ fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
     assert!(decode_tile(&resealed(odd)).is_err(), "27 voxels: the pad bits must be 0");
     assert!(encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&Coverage::new(0.3), 2))).is_err());
 }
+
+#[test]
+fn a_coverage_tile_whose_voxel_keys_would_overflow_is_refused() {
+    use crate::align::{encode_tile, Coverage};
+    let cov = Coverage::new(0.25);
+    // Tile keys this far out have no i32 voxel keys at 16 voxels per edge.
+    assert!(encode_tile((i32::MAX / 4, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).is_err());
+    let good = encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
+    let mut far = good.clone();
+    far[12..16].copy_from_slice(&(i32::MAX / 4).to_le_bytes());
+    let n = far.len() - 4;
+    let sum = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&far[..n]);
+    far[n..].copy_from_slice(&sum.to_le_bytes());
+    assert!(decode_tile(&far).is_err());
+    // At the edge of the range it still decodes.
+    let edge = encode_tile((i32::MAX / 16 - 1, -(i32::MAX / 16), 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
+    assert!(decode_tile(&edge).is_ok());
+}

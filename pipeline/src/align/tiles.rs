@@ -199,13 +199,14 @@ fn encode_coverage(
     b.extend_from_slice(&m.to_le_bytes());
     b.extend_from_slice(&min_crossings.to_le_bytes());
     b.extend_from_slice(&0u16.to_le_bytes());
+    let mut bits = vec![0u8; coverage_bytes(m)];
+    let first = first_voxel(key, m).ok_or_else(|| bad(format!("tile {key:?}: its voxel keys overflow")))?;
     let m = i32::from(m);
-    let mut bits = vec![0u8; coverage_bytes(m as u16)];
     let mut i = 0usize;
     for z in 0..m {
         for y in 0..m {
             for x in 0..m {
-                let voxel = (key.0 * m + x, key.1 * m + y, key.2 * m + z);
+                let voxel = (first.0 + x, first.1 + y, first.2 + z);
                 if coverage.crossings_of(&voxel) >= min_crossings.max(1) {
                     if let Some(byte) = bits.get_mut(i / 8) {
                         *byte |= 1 << (i % 8);
@@ -217,6 +218,13 @@ fn encode_coverage(
     }
     b.extend_from_slice(&bits);
     Ok(())
+}
+
+/// The key of the first coverage voxel of tile `key` at `m` voxels per edge, when every voxel
+/// of the tile has a key (i32).
+fn first_voxel(key: Key, m: u16) -> Option<Key> {
+    let first = |k: i32| k.checked_mul(i32::from(m)).filter(|f| f.checked_add(i32::from(m)).is_some());
+    Some((first(key.0)?, first(key.1)?, first(key.2)?))
 }
 
 fn coverage_bytes(per_edge: u16) -> usize {
@@ -323,6 +331,7 @@ fn decode_coverage(
     let n = usize::from(m).pow(3);
     let bits =
         b.get(at + COVERAGE_HEADER_LEN..at + COVERAGE_HEADER_LEN + coverage_bytes(m)).ok_or_else(|| bad("short"))?;
+    let first = first_voxel(key, m).ok_or_else(|| bad(format!("tile {key:?}: its voxel keys overflow")))?;
     let m = i32::from(m);
     let mut voxels = Vec::new();
     for (i, byte) in bits.iter().enumerate() {
@@ -335,7 +344,7 @@ fn decode_coverage(
                 return Err(bad("coverage pad bits set"));
             }
             let v = v as i32;
-            voxels.push((key.0 * m + v % m, key.1 * m + (v / m) % m, key.2 * m + v / (m * m)));
+            voxels.push((first.0 + v % m, first.1 + (v / m) % m, first.2 + v / (m * m)));
         }
     }
     Ok(TileCoverage { voxel_m: f64::from(voxel_mm) / 1000.0, min_crossings, voxels })
