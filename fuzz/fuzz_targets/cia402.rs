@@ -3,7 +3,9 @@
 //! state machine never panic on any frame; SDO messages that parse re-encode to the same value.
 use libfuzzer_sys::fuzz_target;
 use starc_base::cia402::nmt::{parse_heartbeat, NmtCommand};
-use starc_base::cia402::{Cia402Config, Cia402Node, Emergency, SdoRequest, SdoResponse, VelocityCommand, VelocityStatus};
+use starc_base::cia402::{
+    Cia402Config, Cia402Node, Emergency, SdoRequest, SdoResponse, VelocityCommand, VelocityStatus,
+};
 use starc_base::DriveMode;
 use starc_can::{CanFrame, CanId};
 use starc_time::{Clock, Stamp};

@@ -4,8 +4,8 @@
 //! tensor or a wrong shape) or runs.
 use libfuzzer_sys::fuzz_target;
 use starc_pipeline::detect::pillars::weights::{encode, Weights};
-use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, WindowPoint};
 use starc_pipeline::detect::pillars::PillarsDetector;
+use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, WindowPoint};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(weights) = Weights::parse(data) else { return };
