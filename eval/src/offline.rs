@@ -27,18 +27,6 @@ pub enum Start {
     Anywhere,
 }
 
-/// The rig's default confirmation of a first alignment, in seconds (the rig core's default).
-pub const CONFIRM_FIRST_S: f64 = 3.0;
-
-/// Whole nanoseconds of `s` seconds (negative and non-finite: 0).
-pub fn seconds_to_ns(s: f64) -> u64 {
-    if s.is_finite() && s > 0.0 {
-        (s * 1e9).round() as u64
-    } else {
-        0
-    }
-}
-
 /// One offline run of both sides.
 pub struct Offline {
     pub out: PathBuf,
@@ -78,7 +66,7 @@ impl Offline {
             lidar_t_camera: truth.mount.lidar_t_camera,
             start: Start::FromTruth { hint_m: 1.0, hint_deg: 20.0 },
             start_gate_m: 2.0,
-            confirm_first_s: CONFIRM_FIRST_S,
+            confirm_first_s: starc_pipeline::mission::CONFIRM_FIRST_S,
             coverage: true,
             robot: RobotCoreConfig::default(),
             truth: Some(truth),
@@ -154,12 +142,9 @@ impl Run {
         let pipeline = |source| EvalError::Pipeline { path: cfg.out.clone(), source };
         let stopwatch = Stopwatch::wall_if(cfg.wall_timing);
         let robot_cfg = cfg.robot.clone().with_stopwatch(stopwatch);
-        let core = RigCoreConfig {
-            start_gate_m: cfg.start_gate_m,
-            confirm_span_ns: seconds_to_ns(cfg.confirm_first_s),
-            ..RigCoreConfig::default()
-        }
-        .with_stopwatch(stopwatch);
+        let core = RigCoreConfig { start_gate_m: cfg.start_gate_m, ..RigCoreConfig::default() }
+            .with_confirm_first_s(cfg.confirm_first_s)
+            .with_stopwatch(stopwatch);
         let rig_cfg = RigSideConfig {
             core,
             camera: cfg.camera.clone(),

@@ -160,7 +160,7 @@ fn default_start_gate_m() -> f64 {
 }
 
 fn default_confirm_first_s() -> f64 {
-    3.0
+    starc_pipeline::mission::CONFIRM_FIRST_S
 }
 
 fn default_record_frames_every() -> u64 {

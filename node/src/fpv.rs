@@ -192,9 +192,9 @@ fn side_config(cfg: &FpvNodeConfig) -> Result<RigSideConfig> {
         core: RigCoreConfig {
             lio: lio_config(cfg.lio.as_deref())?,
             start_gate_m: cfg.start_gate_m,
-            confirm_span_ns: (cfg.confirm_first_s * 1e9).round() as u64,
             ..RigCoreConfig::default()
-        },
+        }
+        .with_confirm_first_s(cfg.confirm_first_s),
         camera,
         lidar_t_camera: cfg.camera.lidar_t_camera()?,
         render: render_config(cfg.render.as_deref())?,

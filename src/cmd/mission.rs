@@ -44,7 +44,7 @@ pub struct Args {
     pub start_gate_m: f64,
     /// Apply the rig's first alignment once searches have found it again over this long (s;
     /// 0: the first accepted one at once, as before 2026-11-27).
-    #[arg(long, default_value_t = starc_eval::offline::CONFIRM_FIRST_S)]
+    #[arg(long, default_value_t = starc_pipeline::mission::CONFIRM_FIRST_S)]
     pub confirm_first_s: f64,
     /// Draw a walker only from this height above the floor up (the robot core's
     /// `walker_min_height_m`, 0.8 by default; 0 draws their legs too).

@@ -78,7 +78,7 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
         camera: camera.model,
         start,
         start_gate_m: cfg.as_ref().map_or(2.0, |c| c.start_gate_m),
-        confirm_first_s: cfg.as_ref().map_or(starc_eval::offline::CONFIRM_FIRST_S, |c| c.confirm_first_s),
+        confirm_first_s: cfg.as_ref().map_or(starc_pipeline::mission::CONFIRM_FIRST_S, |c| c.confirm_first_s),
         coverage: true,
         robot: RobotCoreConfig::default(),
         truth: None,

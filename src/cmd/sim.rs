@@ -63,7 +63,7 @@ pub struct Args {
     start_gate_m: f64,
     /// Apply the rig's first alignment once searches have found it again over this long (s;
     /// 0: the first accepted one at once).
-    #[arg(long, default_value_t = starc_eval::offline::CONFIRM_FIRST_S)]
+    #[arg(long, default_value_t = starc_pipeline::mission::CONFIRM_FIRST_S)]
     confirm_first_s: f64,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,

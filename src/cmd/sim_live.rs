@@ -439,7 +439,7 @@ mod tests {
             frames_every: 0,
             start_hint,
             start_gate_m: 2.0,
-            confirm_first_s: 3.0,
+            confirm_first_s: starc_pipeline::mission::CONFIRM_FIRST_S,
             view: Default::default(),
             detect: Default::default(),
             wheels: false,

@@ -68,14 +68,10 @@ def read_scans(path):
         yield start, end, block[:, :3].astype(np.float64), block[:, 3].astype(np.float64)
 
 
-def kiss_icp(scans_path, threads=1):
-    from kiss_icp.config import load_config
-    from kiss_icp.kiss_icp import KissICP
-
-    cfg = load_config(None)
-    cfg.data.min_range = 0.5
-    cfg.registration.max_num_threads = threads
-    odom = KissICP(cfg)
+def register_frames(odom, scans_path):
+    """Every scan of 100 points or more through a KISS-ICP-style `odom` (`register_frame` with
+    per-point times normalised to [0, 1], `last_pose`): the scans' stamps, the poses and the
+    registration times (s)."""
     stamps, poses, times = [], [], []
     for start, end, pts, t in read_scans(scans_path):
         if len(pts) < 100:
@@ -87,6 +83,17 @@ def kiss_icp(scans_path, threads=1):
         stamps.append((start, end))
         poses.append(odom.last_pose.copy())
     return stamps, poses, times
+
+
+def kiss_icp(scans_path, threads=1):
+    from kiss_icp.config import load_config
+    from kiss_icp.kiss_icp import KissICP
+
+    cfg = load_config(None)
+    cfg.data.min_range = 0.5
+    cfg.registration.max_num_threads = threads
+    odom = KissICP(cfg)
+    return register_frames(odom, scans_path)
 
 
 def genz_icp(scans_path, deskew=True):
@@ -101,17 +108,7 @@ def genz_icp(scans_path, deskew=True):
     cfg.data.min_range = 0.5
     cfg.data.deskew = deskew
     odom = GenZICP(cfg)
-    stamps, poses, times = [], [], []
-    for start, end, pts, t in read_scans(scans_path):
-        if len(pts) < 100:
-            continue
-        span = max(t.max() - t.min(), 1e-9)
-        began = time.perf_counter()
-        odom.register_frame(pts, (t - t.min()) / span)
-        times.append(time.perf_counter() - began)
-        stamps.append((start, end))
-        poses.append(odom.last_pose.copy())
-    return stamps, poses, times
+    return register_frames(odom, scans_path)
 
 
 def read_imu_pcap(path, device):

@@ -211,13 +211,6 @@ fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
         b[i] ^= 0x10;
         assert!(decode_tile(&b).is_err(), "byte {i}");
     }
-    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-    let resealed = |mut b: Vec<u8>| {
-        let n = b.len() - 4;
-        let sum = crc.checksum(&b[..n]);
-        b[n..].copy_from_slice(&sum.to_le_bytes());
-        b
-    };
     let mut voxel = good.clone();
     voxel[42..44].copy_from_slice(&300u16.to_le_bytes());
     assert!(decode_tile(&resealed(voxel)).is_err(), "4 m is no whole number of 0.3 m voxels");
@@ -238,11 +231,17 @@ fn a_coverage_tile_whose_voxel_keys_would_overflow_is_refused() {
     let good = encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
     let mut far = good.clone();
     far[12..16].copy_from_slice(&(i32::MAX / 4).to_le_bytes());
-    let n = far.len() - 4;
-    let sum = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&far[..n]);
-    far[n..].copy_from_slice(&sum.to_le_bytes());
-    assert!(decode_tile(&far).is_err());
+    assert!(decode_tile(&resealed(far)).is_err());
     // At the edge of the range it still decodes.
     let edge = encode_tile((i32::MAX / 16 - 1, -(i32::MAX / 16), 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
     assert!(decode_tile(&edge).is_ok());
+}
+
+/// `b` with its last four bytes replaced by the right CRC of the rest: a forged tile that only
+/// the parser's other checks can refuse.
+fn resealed(mut b: Vec<u8>) -> Vec<u8> {
+    let n = b.len() - 4;
+    let sum = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&b[..n]);
+    b[n..].copy_from_slice(&sum.to_le_bytes());
+    b
 }

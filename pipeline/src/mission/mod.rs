@@ -25,7 +25,7 @@ pub use input::{MissionInput, Side};
 pub use offline::{MissionEvent, OfflineMission};
 pub use overlay::Overlay;
 pub use place::ScanPlacer;
-pub use rig::{AlignInputs, AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig};
+pub use rig::{AlignInputs, AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCoreConfig, CONFIRM_FIRST_S};
 pub use rig_side::{
     DetectionTake, RefusedDetections, RigSide, RigSideConfig, HOLD_NS, MAX_DETECTION_AGE_NS, MAX_DETECTION_LEAD_NS,
 };

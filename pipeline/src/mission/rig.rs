@@ -20,6 +20,9 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+/// How long a first alignment must be found again before it is used, by default (s).
+pub const CONFIRM_FIRST_S: f64 = 3.0;
+
 /// How the rig's side runs; the defaults are what `starc sim` measures.
 #[derive(Clone, Debug)]
 pub struct RigCoreConfig {
@@ -91,7 +94,7 @@ impl Default for RigCoreConfig {
             min_map_points: 1000,
             start_gate_m: 2.0,
             lose_after_contradictions: 3,
-            confirm_span_ns: 3_000_000_000,
+            confirm_span_ns: (CONFIRM_FIRST_S * 1e9) as u64,
             confirm_agree_m: 0.3,
             confirm_agree_deg: 3.0,
         }
@@ -99,6 +102,13 @@ impl Default for RigCoreConfig {
 }
 
 impl RigCoreConfig {
+    /// These settings with a first alignment confirmed over `s` seconds (0, negative or not
+    /// finite: applied at once).
+    pub fn with_confirm_first_s(mut self, s: f64) -> Self {
+        self.confirm_span_ns = if s.is_finite() && s > 0.0 { (s * 1e9).round() as u64 } else { 0 };
+        self
+    }
+
     /// These settings with every compute time measured on `stopwatch` (LIO and alignment).
     pub fn with_stopwatch(mut self, stopwatch: crate::timing::Stopwatch) -> Self {
         self.lio.stopwatch = stopwatch;
@@ -331,8 +341,8 @@ pub struct RigCore {
     /// Re-registrations refused in a row for contradicting the map, and alignments dropped.
     contradicted_in_row: u32,
     pub lost: usize,
-    /// What the last refused registration before a world pose said (see [`Self::waiting`]).
-    last_refusal: Option<Waiting>,
+    /// What the rig waits for before a world pose, from the last registration (see [`Self::waiting`]).
+    waiting_for: Option<Waiting>,
     /// The first alignment waiting for confirmation.
     candidate: Option<Candidate>,
 }
@@ -369,7 +379,7 @@ impl RigCore {
             accepted: 0,
             contradicted_in_row: 0,
             lost: 0,
-            last_refusal: None,
+            waiting_for: None,
             candidate: None,
             cfg,
         })
@@ -489,7 +499,7 @@ impl RigCore {
         if self.map_raw_len <= self.cfg.min_map_points {
             return Waiting::Map;
         }
-        self.last_refusal.unwrap_or(Waiting::FirstAttempt)
+        self.waiting_for.unwrap_or(Waiting::FirstAttempt)
     }
 
     /// Whether a registration is due by time (the caller then hands over the newest map).
@@ -595,7 +605,7 @@ impl RigCore {
         }
         self.candidate = Some(c);
         let verdict = AlignVerdict::Candidate { searches: c.searches, span_ns, needed_ns };
-        self.last_refusal = Some(Waiting::Confirming { searches: c.searches });
+        self.waiting_for = Some(Waiting::Confirming { searches: c.searches });
         Some(verdict)
     }
 
@@ -603,7 +613,7 @@ impl RigCore {
     /// towards dropping the alignment.
     fn refused(&mut self, tracking: bool, failure: AlignFailure) -> AlignVerdict {
         if !self.aligned() {
-            self.last_refusal = Some(Waiting::from_failure(&failure));
+            self.waiting_for = Some(Waiting::from_failure(&failure));
             // A candidate must be found by every search until confirmed.
             self.candidate = None;
         }
