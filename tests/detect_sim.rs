@@ -108,7 +108,9 @@ fn report(ev: &detect_sim::Evaluation) {
 #[test]
 fn detector_finds_people_in_every_pose_in_a_furnished_room() {
     let sim = room_run();
-    let cfg = DetectConfig::from_toml(include_str!("../config/detect.toml")).unwrap();
+    // The hand-set gates (the shipped file's settings, whichever detector it picks).
+    let shipped = DetectConfig::from_toml(include_str!("../config/detect.toml")).unwrap();
+    let cfg = DetectConfig { kind: DetectorKind::Geometric, ..shipped };
     let mut det = GeometricDetector::new(cfg).unwrap();
     let rule = MatchRule::default();
     let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &rule);
@@ -127,6 +129,7 @@ fn detector_finds_people_in_every_pose_in_a_furnished_room() {
     // The room has decoys: with the box, slab and flatness gates off, furniture and clutter
     // pass for people (so the bounds above test the gates, not an empty scene).
     let loose = DetectConfig {
+        kind: DetectorKind::Geometric,
         max_face_share: 1.0,
         max_planarity: 1.0,
         min_thickness_m: 0.001,
@@ -155,5 +158,26 @@ fn pointpillars_finds_the_lying_person_in_the_furnished_room() {
     let (found, visible) = ev.per_pose.get("lying").copied().unwrap_or_default();
     assert!(found * 10 >= visible * 9 && visible * 10 >= ev.windows * 9, "lying found in {found} of {visible} windows");
     assert!(ev.counts.precision() >= 0.5, "precision {:.3}", ev.counts.precision());
+    assert!(ev.purity() >= 0.8, "person points {:.3}", ev.purity());
+}
+
+/// The learned cluster scorer with the shipped trees on the same room, which is none of the
+/// generated buildings it learned from. Measured when the trees were shipped (2026-11-28): no
+/// false positive, and every window's standing, crouching and lying person, but the sitting one
+/// in 2 of 23 (merged with their chair, it looks like furniture to the trees). The bounds guard
+/// what it does today, not the goal.
+#[test]
+fn trees_find_people_in_the_furnished_room() {
+    let sim = room_run();
+    let cfg = DetectConfig { kind: DetectorKind::Trees, ..DetectConfig::default() };
+    let mut det = GeometricDetector::new(cfg).unwrap();
+    let ev = detect_sim::evaluate(&sim, &mut det, 300_000_000, 100_000_000, &MatchRule::default());
+    report(&ev);
+    assert!(ev.windows >= 20, "{} windows", ev.windows);
+    assert!(ev.counts.precision() >= 0.95, "precision {:.3}", ev.counts.precision());
+    for pose in ["standing", "crouching", "lying"] {
+        let (found, visible) = ev.per_pose.get(pose).copied().unwrap_or_default();
+        assert!(found * 10 >= visible * 9 && visible > 0, "{pose} found in {found} of {visible} windows");
+    }
     assert!(ev.purity() >= 0.8, "person points {:.3}", ev.purity());
 }

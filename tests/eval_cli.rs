@@ -81,16 +81,27 @@ fn eval_writes_rows_a_summary_and_plots() {
     assert!(!ok && text.contains("mixes development seeds"), "{text}");
 }
 
-/// `starc dataset` on a short run of one development building: the four arrays numpy reads, a
-/// box per person per window, and the test seeds refused without `--test-set`.
+/// `starc dataset --clusters` on a short run of one development building: the four arrays numpy
+/// reads, a box per person per window, the cluster table, and the test seeds refused without
+/// `--test-set`.
 #[test]
 fn dataset_writes_windows_and_boxes_and_keeps_test_seeds_apart() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ds");
     let (ok, text) = starc(&["dataset", "--seeds", "1000..1000", "--out", out.to_str().unwrap()]);
     assert!(!ok && text.contains("test set"), "{text}");
-    let (ok, text) =
-        starc(&["dataset", "--seeds", "2..2", "--max-duration", "8", "--out", out.to_str().unwrap(), "--jobs", "1"]);
+    let (ok, text) = starc(&[
+        "dataset",
+        "--seeds",
+        "2..2",
+        "--max-duration",
+        "8",
+        "--out",
+        out.to_str().unwrap(),
+        "--jobs",
+        "1",
+        "--clusters",
+    ]);
     assert!(ok, "{text}");
     let building = out.join("warehouse-2");
     let npy_shape = |name: &str| {
@@ -118,6 +129,10 @@ fn dataset_writes_windows_and_boxes_and_keeps_test_seeds_apart() {
     // Every window lists every person in the building (seen or not).
     assert_eq!(boxes[1], 10);
     assert_eq!(boxes[0] % windows[0], 0, "{boxes:?} boxes over {windows:?} windows");
+    // --clusters: a row per cluster the detector judged, the trees' inputs then the truth.
+    let clusters = npy_shape("clusters.npy");
+    assert_eq!(clusters[1], starc_eval::clusters::COLUMNS);
+    assert!(clusters[0] >= windows[0], "{clusters:?} clusters over {windows:?} windows");
     let meta = std::fs::read_to_string(building.join("meta.json")).unwrap();
     assert!(meta.contains("\"set\": \"development\""), "{meta}");
     assert!(!out.join("sim").join("warehouse-2").exists(), "the simulator's run is removed");

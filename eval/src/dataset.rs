@@ -3,15 +3,17 @@
 //! moved into the model frame, with each true person's box, pose class and returns, and a person
 //! label per point. Written as .npy files that numpy reads without help.
 
+use crate::clusters::{survey_window, LabelledPerson, COLUMNS};
 use crate::detection::truth_in_world;
 use crate::error::write;
+use crate::truth::TruePose;
 use crate::truth::{at, people_at, read_people, read_tum, PersonBox, PersonReturns, Trajectory};
 use crate::{EvalError, Result};
 use nalgebra::Isometry3;
 use starc_pipeline::detect::eval::{MatchRule, TruthPerson};
 use starc_pipeline::detect::pillars::npy::{le_bytes, npy};
 use starc_pipeline::detect::pillars::ModelFrame;
-use starc_pipeline::detect::{DetectConfig, DetectWindow, WindowPoint};
+use starc_pipeline::detect::{DetectConfig, DetectWindow, GeometricDetector, WindowPoint};
 use starc_pipeline::mission::{MissionInput, RobotCore, RobotCoreConfig, RobotDetection, RobotStep, Side};
 use starc_time::{Clock, Stamp};
 use std::path::Path;
@@ -52,11 +54,16 @@ pub struct ExportOptions {
     pub every: usize,
     /// The sensor's height above the floor when a window shows no floor.
     pub sensor_height_m: f64,
+    /// Write the windows' points, labels and boxes (the PointPillars data).
+    pub points: bool,
+    /// Write clusters.npy: every cluster the geometric detector judges, for the trees
+    /// ([`crate::clusters`]).
+    pub clusters: bool,
 }
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        Self { every: 3, sensor_height_m: 0.45 }
+        Self { every: 3, sensor_height_m: 0.45, points: true, clusters: false }
     }
 }
 
@@ -68,6 +75,8 @@ pub struct Exported {
     pub boxes: usize,
     /// Boxes with enough returns for the evaluation to demand them (`MatchRule::min_returns`).
     pub visible_boxes: usize,
+    /// Rows of clusters.npy (0 when not written).
+    pub clusters: usize,
 }
 
 /// The arrays of a building, filled window by window.
@@ -78,6 +87,9 @@ struct Arrays {
     windows: Vec<i64>,
     boxes: Vec<f32>,
     visible: usize,
+    clusters: Vec<f32>,
+    /// The detector that surveys each window's clusters, when clusters.npy is written.
+    surveyor: Option<GeometricDetector>,
 }
 
 /// Runs the robot's core over a run's inputs and writes its windows into `out`
@@ -92,6 +104,9 @@ pub fn export_building<E: std::fmt::Display>(
     let mut core = RobotCore::new(RobotCoreConfig::default()).map_err(pipeline)?;
     let detect_cfg = DetectConfig::default();
     let mut arrays = Arrays::default();
+    if opts.clusters {
+        arrays.surveyor = Some(crate::clusters::surveyor().map_err(pipeline)?);
+    }
     let (mut steps, mut lio_t_world, mut seen) = (Vec::new(), None, 0usize);
     for input in inputs {
         match input.map_err(|e| EvalError::Input(e.to_string()))? {
@@ -111,7 +126,7 @@ pub fn export_building<E: std::fmt::Display>(
             }
         }
     }
-    write_arrays(&arrays, out)
+    write_arrays(&arrays, opts, out)
 }
 
 fn add_window(
@@ -132,8 +147,14 @@ fn add_window(
     let boxes_now = people_at(&truth.people, d.stamp_ns);
     let people = truth_in_world(&boxes_now, l_t_w, &d.points, Some(&truth.returns));
     let index = (arrays.windows.len() / 2) as f32;
+    if let Some(det) = arrays.surveyor.as_mut() {
+        let labels: Vec<u16> = d.points.iter().map(|p| person_label(p, &people, &frame)).collect();
+        let labelled: Vec<LabelledPerson<'_>> =
+            people.iter().zip(&boxes_now).map(|(t, b)| LabelledPerson { truth: t, posture: posture(b.pose) }).collect();
+        survey_window(det, &window, &labels, &labelled, index as usize, &mut arrays.clusters);
+    }
     let first = arrays.labels.len() as i64;
-    for p in &d.points {
+    for p in d.points.iter().filter(|_| opts.points) {
         let m = frame.point_to_model(p);
         if !kept(m) {
             continue;
@@ -166,14 +187,30 @@ fn person_label(p: &WindowPoint, people: &[TruthPerson], frame: &ModelFrame) -> 
     people.iter().find(|t| t.contains(&xyz, PERSON_MARGIN_M)).map_or(0, |t| t.label)
 }
 
-fn write_arrays(a: &Arrays, out: &Path) -> Result<Exported> {
+/// The trees' posture column: 1 standing, 2 sitting or crouching, 3 lying.
+fn posture(pose: TruePose) -> u8 {
+    match pose {
+        TruePose::Standing => 1,
+        TruePose::Sitting | TruePose::Crouching => 2,
+        TruePose::Lying => 3,
+    }
+}
+
+fn write_arrays(a: &Arrays, opts: &ExportOptions, out: &Path) -> Result<Exported> {
     std::fs::create_dir_all(out).map_err(|source| EvalError::Write { path: out.to_path_buf(), source })?;
     let n = a.labels.len();
     let windows = a.windows.len() / 2;
     let boxes = a.boxes.len() / 10;
-    write(&out.join("points.npy"), npy("<i2", &[n, 3], &le_bytes(&a.points_cm, i16::to_le_bytes)))?;
-    write(&out.join("labels.npy"), npy("<u2", &[n], &le_bytes(&a.labels, u16::to_le_bytes)))?;
-    write(&out.join("windows.npy"), npy("<i8", &[windows, 2], &le_bytes(&a.windows, i64::to_le_bytes)))?;
-    write(&out.join("boxes.npy"), npy("<f4", &[boxes, 10], &le_bytes(&a.boxes, f32::to_le_bytes)))?;
-    Ok(Exported { windows, points: n, boxes, visible_boxes: a.visible })
+    if opts.points {
+        write(&out.join("points.npy"), npy("<i2", &[n, 3], &le_bytes(&a.points_cm, i16::to_le_bytes)))?;
+        write(&out.join("labels.npy"), npy("<u2", &[n], &le_bytes(&a.labels, u16::to_le_bytes)))?;
+        write(&out.join("windows.npy"), npy("<i8", &[windows, 2], &le_bytes(&a.windows, i64::to_le_bytes)))?;
+        write(&out.join("boxes.npy"), npy("<f4", &[boxes, 10], &le_bytes(&a.boxes, f32::to_le_bytes)))?;
+    }
+    let clusters = a.clusters.len() / COLUMNS;
+    if opts.clusters {
+        let table = npy("<f4", &[clusters, COLUMNS], &le_bytes(&a.clusters, f32::to_le_bytes));
+        write(&out.join("clusters.npy"), table)?;
+    }
+    Ok(Exported { windows, points: n, boxes, visible_boxes: a.visible, clusters })
 }

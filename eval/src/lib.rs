@@ -25,6 +25,7 @@
 
 pub mod ap;
 pub mod batch;
+pub mod clusters;
 pub mod dataset;
 pub mod detection;
 pub mod drift;

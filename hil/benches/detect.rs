@@ -20,7 +20,9 @@ use std::path::PathBuf;
 fn main() {
     // `cargo bench` passes --bench; a filter argument picks scenarios.
     let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/detect.toml")).unwrap();
+    // STARC_DETECT_CONFIG: another detector config (kind = "trees" to bench the learned scorer).
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/detect.toml").to_string();
+    let text = std::fs::read_to_string(std::env::var("STARC_DETECT_CONFIG").unwrap_or(shipped)).unwrap();
     let cfg = DetectConfig::from_toml(&text).unwrap();
     let rule = MatchRule::default();
     let seed: u64 = std::env::var("STARC_DETECT_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(1);

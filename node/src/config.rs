@@ -25,7 +25,7 @@ pub struct RobotNodeConfig {
     /// A LIO config file (config/lio.toml); none: the defaults (internal IMU).
     #[serde(default)]
     pub lio: Option<PathBuf>,
-    /// The person detector (`[detect]`: `kind = "geometric" | "pointpillars"` and any field of
+    /// The person detector (`[detect]`: `kind = "trees" | "geometric" | "pointpillars"` and any field of
     /// config/detect.toml); none: the defaults.
     #[serde(default)]
     pub detect: starc_pipeline::detect::DetectConfig,

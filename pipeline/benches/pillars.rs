@@ -1,5 +1,5 @@
 //! The learned detector's time per window on one core, split into its stages, beside the
-//! geometric detector on the same window and onnxruntime (one thread) on the same network.
+//! geometric detector (with its gates, and with the trees) on the same window and onnxruntime (one thread) on the same network.
 //!
 //! `cargo bench -p starc-pipeline --bench pillars [-- RUNS]` times RUNS (default 200) windows of
 //! a synthetic room (about 60,000 returns, the size of the robot's 0.3 s window) with the
@@ -19,7 +19,7 @@ mod room;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use starc_pipeline::detect::pillars::grid::pillarize;
 use starc_pipeline::detect::pillars::PillarsDetector;
-use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, GeometricDetector, WindowPoint};
+use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, DetectorKind, GeometricDetector, WindowPoint};
 use starc_time::{Clock, Stamp};
 use std::path::PathBuf;
 use std::process::Command;
@@ -48,8 +48,10 @@ fn main() {
     };
     let cfg = DetectConfig::default();
     let mut pillars = PillarsDetector::new(&cfg).unwrap();
-    let mut geometric = GeometricDetector::new(cfg).unwrap();
+    let mut trees = GeometricDetector::new(DetectConfig { kind: DetectorKind::Trees, ..cfg.clone() }).unwrap();
+    let mut geometric = GeometricDetector::new(DetectConfig { kind: DetectorKind::Geometric, ..cfg }).unwrap();
     let (mut found, mut stages, mut total, mut geo) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut scored = Vec::new();
     for _ in 0..runs {
         found.clear();
         let t0 = Instant::now();
@@ -60,6 +62,10 @@ fn main() {
         let t0 = Instant::now();
         geometric.detect(&window, &mut found);
         geo.push(t0.elapsed().as_secs_f64() * 1e3);
+        found.clear();
+        let t0 = Instant::now();
+        trees.detect(&window, &mut found);
+        scored.push(t0.elapsed().as_secs_f64() * 1e3);
     }
     let model_points: Vec<[f32; 3]> = room::room();
     let p = pillarize(&model_points);
@@ -77,6 +83,7 @@ fn main() {
     line("each box's points", stages.iter().map(|s| s.points_ms).collect());
     line("pointpillars, whole window", total);
     line("geometric, same window", geo);
+    line("trees, same window", scored);
 
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let python = root.join(".venv/bin/python");

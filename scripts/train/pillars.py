@@ -15,17 +15,17 @@ inference loads) with `pfn.onnx` and `backbone.onnx` (what its test compares aga
 import argparse
 import json
 import math
-import struct
 import sys
 import time
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from stpw import read_stpw, write_stpw
 
 # The pillar grid (docs/pillars.md, "Pillars"); written to the weights file as `grid`.
 X_MIN, X_MAX = 0.0, 19.2
@@ -46,7 +46,6 @@ VISIBLE_RETURNS = 30  # fewer returns than this: not visible, neither demanded n
 
 # Layers in the order of the weights file; every one but h1 has a batch norm to fold.
 LAYERS = ("pfn", "a0", "a1", "a2", "b0", "b1", "up", "h0", "h1")
-STPW_VERSION = 1
 
 TEST_SEED_MIN = 1000
 HEATMAP_SIGMA_CELLS = 1.0
@@ -640,46 +639,6 @@ def eta(step, total_steps, started, budget_s):
 
 def grid_tensor():
     return np.array([X_MIN, X_MAX, Y_MIN, Y_MAX, Z_MIN, Z_MAX, PILLAR_M, MAX_POINTS], np.float32)
-
-
-def write_stpw(path, tensors):
-    """tensors: [(name, array)] in file order. Format: docs/pillars.md, "Weights file"."""
-    data = bytearray(b"STPW")
-    data += struct.pack("<II", STPW_VERSION, len(tensors))
-    for name, array in tensors:
-        encoded = name.encode("utf-8")
-        data += struct.pack("<H", len(encoded)) + encoded
-        data += struct.pack(f"<B{array.ndim}I", array.ndim, *array.shape)
-        data += np.ascontiguousarray(array, dtype="<f4").tobytes()
-    data += struct.pack("<I", zlib.crc32(data))
-    Path(path).write_bytes(bytes(data))
-
-
-def read_stpw(path):
-    """The reverse of write_stpw, with every check the Rust loader makes; -> [(name, array)]."""
-    data = Path(path).read_bytes()
-    if data[:4] != b"STPW":
-        raise ValueError(f"{path}: not an STPW file")
-    (crc,) = struct.unpack_from("<I", data, len(data) - 4)
-    if zlib.crc32(data[:-4]) != crc:
-        raise ValueError(f"{path}: CRC-32 mismatch")
-    version, count = struct.unpack_from("<II", data, 4)
-    if version != STPW_VERSION:
-        raise ValueError(f"{path}: version {version}")
-    at, tensors = 12, []
-    for _ in range(count):
-        (length,) = struct.unpack_from("<H", data, at)
-        name = data[at + 2 : at + 2 + length].decode("utf-8")
-        at += 2 + length
-        rank = data[at]
-        shape = struct.unpack_from(f"<{rank}I", data, at + 1)
-        at += 1 + 4 * rank
-        size = int(np.prod(shape))
-        tensors.append((name, np.frombuffer(data, "<f4", size, at).reshape(shape)))
-        at += 4 * size
-    if at != len(data) - 4:
-        raise ValueError(f"{path}: {len(data) - 4 - at} stray bytes before the CRC")
-    return tensors
 
 
 class PfnExport(nn.Module):

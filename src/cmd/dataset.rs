@@ -1,6 +1,7 @@
 //! `starc dataset --seeds A..B --out DIR`: the learned detector's training data from generated
 //! buildings (docs/pillars.md): each building simulated (no camera), the robot's core run over
-//! it, and every third detection window written with its true people under DIR/<family>-<seed>/.
+//! it, and every third detection window written with its true people under DIR/<family>-<seed>/
+//! (with `--clusters`, also every cluster the geometric detector judges there, for the trees).
 //! Seeds from 1000 up are the test set: exported only with `--test-set`, for reporting.
 
 use anyhow::{bail, Context};
@@ -31,6 +32,14 @@ pub struct Args {
     /// Cut each building's run at this many simulated seconds (smoke tests).
     #[arg(long)]
     max_duration: Option<f64>,
+    /// Also write clusters.npy: every cluster the geometric detector judges in each window, with
+    /// the learned scorer's inputs and the truth (scripts/train/cluster_trees.py trains on it).
+    #[arg(long)]
+    clusters: bool,
+    /// Leave out the windows' points, labels and boxes (the PointPillars data; about 120 MB a
+    /// building): with --clusters, only clusters.npy.
+    #[arg(long, requires = "clusters")]
+    no_points: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -53,8 +62,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     let t0 = Instant::now();
                     let what = match one_building(&args, seed) {
                         Ok((name, e)) => format!(
-                            "{name}: {} windows, {} points, {} boxes ({} visible)",
-                            e.windows, e.points, e.boxes, e.visible_boxes
+                            "{name}: {} windows, {} points, {} boxes ({} visible), {} clusters",
+                            e.windows, e.points, e.boxes, e.visible_boxes, e.clusters
                         ),
                         Err(e) => {
                             failed.fetch_add(1, Ordering::Relaxed);
@@ -95,7 +104,12 @@ fn one_building(args: &Args, seed: u64) -> anyhow::Result<(String, Exported)> {
     let mut inputs = starc_bridge::from_capture(&sim_dir.join("avia.pcap"), ROBOT_AVIA_IP, FPV_AVIA_IP)?;
     inputs =
         starc_bridge::wheels::with_wheels(inputs, super::sim::wheel_samples(&sim_dir, g.scenario.robot.get_ref())?);
-    let export_opts = ExportOptions { every: args.every, ..ExportOptions::default() };
+    let export_opts = ExportOptions {
+        every: args.every,
+        points: !args.no_points,
+        clusters: args.clusters,
+        ..ExportOptions::default()
+    };
     let out = args.out.join(&name);
     let exported = export_building(inputs, &truth, &export_opts, &out)?;
     write_meta(&out, seed, &g.family.to_string(), args.every, &exported)?;

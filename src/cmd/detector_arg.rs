@@ -6,8 +6,9 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct DetectorArgs {
-    /// The person detector: geometric (rules) or pointpillars (learned; docs/pillars.md).
-    /// Default: the detect config's `kind`, else geometric.
+    /// The person detector: trees (clusters scored by learned trees), geometric (clusters scored
+    /// by hand-set rules) or pointpillars (a learned network; docs/pillars.md). Default: the
+    /// detect config's `kind`, else trees (docs/detect.md).
     #[arg(long)]
     pub detector: Option<DetectorKind>,
     /// A detector config file (like config/detect.toml); fields left out keep their defaults.

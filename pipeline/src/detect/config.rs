@@ -98,18 +98,21 @@ pub struct DetectConfig {
     /// nearer (what hides them). 0 turns it off.
     pub behind_height_m: [f64; 2],
     pub behind_min_edge_share: f64,
-    /// Which detector runs: `geometric` (the rules above) or `pointpillars` (the learned one,
-    /// set in `[pillars]`; it uses the floor settings above).
+    /// Which detector runs: `geometric` (the rules above), `trees` (the same clusters scored by
+    /// learned trees, set in `[trees]`) or `pointpillars` (the learned network, set in
+    /// `[pillars]`; it uses the floor settings above).
     pub kind: DetectorKind,
     pub pillars: PillarsConfig,
+    pub trees: TreesConfig,
 }
 
 /// The detector a robot runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DetectorKind {
-    #[default]
     Geometric,
+    #[default]
+    Trees,
     Pointpillars,
 }
 
@@ -118,9 +121,30 @@ impl std::str::FromStr for DetectorKind {
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
             "geometric" => Ok(Self::Geometric),
+            "trees" => Ok(Self::Trees),
             "pointpillars" => Ok(Self::Pointpillars),
-            _ => Err(format!("{s:?}: want geometric or pointpillars")),
+            _ => Err(format!("{s:?}: want geometric, trees or pointpillars")),
         }
+    }
+}
+
+/// Settings of the learned cluster scorer (`kind = "trees"`, [`crate::detect::trees`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TreesConfig {
+    /// A trees file (STPW, docs/detect.md); none: the trees built into the program
+    /// (config/models/cluster_trees.stpw when it was built).
+    pub model: Option<std::path::PathBuf>,
+    /// A cluster is a person when the trees give it at least this probability of being one.
+    pub min_score: f64,
+    /// Of two people found closer than this, only the likelier is kept (two pieces of one body
+    /// are not two people).
+    pub min_separation_m: f64,
+}
+
+impl Default for TreesConfig {
+    fn default() -> Self {
+        Self { model: None, min_score: 0.7, min_separation_m: 0.5 }
     }
 }
 
@@ -184,8 +208,9 @@ impl Default for DetectConfig {
             follow_lying_min_length_m: 0.5,
             behind_height_m: [0.45, 1.2],
             behind_min_edge_share: 0.75,
-            kind: DetectorKind::Geometric,
+            kind: DetectorKind::Trees,
             pillars: PillarsConfig::default(),
+            trees: TreesConfig::default(),
         }
     }
 }
@@ -262,6 +287,10 @@ impl DetectConfig {
         }
         if !self.max_bottom_m.is_finite() {
             return Err(bad("max_bottom_m must be finite"));
+        }
+        let t = &self.trees;
+        if !((0.0..=1.0).contains(&t.min_score) && t.min_separation_m.is_finite() && t.min_separation_m >= 0.0) {
+            return Err(bad("trees.min_score must be in [0, 1] and trees.min_separation_m finite and not negative"));
         }
         let p = &self.pillars;
         if !((0.0..=1.0).contains(&p.min_score) && (0.0..=1.0).contains(&p.nms_iou)) {

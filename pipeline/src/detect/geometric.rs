@@ -8,7 +8,8 @@ use super::floor::estimate_floor;
 use super::follow::{tracks, Track};
 use super::fov::FovEnvelope;
 use super::occlusion::{RangeImage, Silhouette};
-use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose};
+use super::trees::{self, TreeModel};
+use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, DetectorKind, FloorModel, PersonPose};
 use crate::PipelineError;
 use nalgebra::{Vector2, Vector3};
 
@@ -23,6 +24,8 @@ const LOW_SHARE: f64 = 0.6;
 /// space and the people it confirmed in the last `follow_s` (see [`DetectConfig::follow_s`]).
 pub struct GeometricDetector {
     cfg: DetectConfig,
+    /// The learned scorer (`kind = "trees"`) in place of the posture gates.
+    trees: Option<TreeModel>,
     /// Where every gate last confirmed someone (x, y in the world) and when (window stamp, ns).
     confirmed: Vec<(Vector2<f64>, u64)>,
     kept: Vec<(u32, Vector3<f64>)>,
@@ -31,6 +34,9 @@ pub struct GeometricDetector {
     last_clusters: Vec<(ClusterFeatures, f64)>,
     /// When set, the points of every scored cluster are kept too (tuning; costs allocations).
     keep_cluster_points: bool,
+    /// When set, nobody is detected and every cluster too big for a person is split (training
+    /// data for a learned scorer: every cluster any scorer could be shown).
+    surveying: bool,
     last_cluster_points: Vec<Vec<u32>>,
     last_silhouettes: Vec<Silhouette>,
 }
@@ -38,13 +44,19 @@ pub struct GeometricDetector {
 impl GeometricDetector {
     pub fn new(cfg: DetectConfig) -> Result<Self, PipelineError> {
         cfg.validate()?;
+        let trees = match cfg.kind {
+            DetectorKind::Trees => Some(trees::load(&cfg.trees)?),
+            _ => None,
+        };
         Ok(Self {
             cfg,
+            trees,
             confirmed: Vec::new(),
             kept: Vec::new(),
             last_floor: None,
             last_clusters: Vec::new(),
             keep_cluster_points: false,
+            surveying: false,
             last_cluster_points: Vec::new(),
             last_silhouettes: Vec::new(),
         })
@@ -69,6 +81,14 @@ impl GeometricDetector {
         self.keep_cluster_points = keep;
     }
 
+    /// Survey every cluster instead of detecting (training data for a learned scorer): nothing
+    /// is detected or followed, every cluster too big for one person is split as well as
+    /// scored, and each cluster's points are kept.
+    pub fn survey(&mut self, on: bool) {
+        self.surveying = on;
+        self.keep_cluster_points |= on;
+    }
+
     /// The points of each of [`Self::last_clusters`], when kept.
     pub fn last_cluster_points(&self) -> &[Vec<u32>] {
         &self.last_cluster_points
@@ -82,7 +102,11 @@ impl GeometricDetector {
 
 impl Detector for GeometricDetector {
     fn name(&self) -> &'static str {
-        "geometric"
+        if self.trees.is_some() {
+            "trees"
+        } else {
+            "geometric"
+        }
     }
 
     fn last_floor(&self) -> Option<FloorModel> {
@@ -94,10 +118,13 @@ impl Detector for GeometricDetector {
         self.last_cluster_points.clear();
         self.last_silhouettes.clear();
         let followed = self.take_followed(window.stamp.ns);
-        let scene = Scene::new(window, &self.cfg, &followed);
+        // Lent to the window's scene while the clusters are judged, then put back.
+        let trees = self.trees.take();
+        let scene = Scene::new(window, &self.cfg, &followed, trees.as_ref());
         self.last_floor = Some(scene.floor);
         keep_above_floor(&mut self.kept, &scene, &self.cfg);
         let confirmed_now = self.judge_clusters(&scene, out);
+        self.trees = trees;
         self.confirmed = followed;
         self.confirmed.extend(confirmed_now);
     }
@@ -120,6 +147,7 @@ impl GeometricDetector {
     /// of someone confirmed whole here is not a second person.
     fn judge_clusters(&mut self, scene: &Scene<'_, '_>, out: &mut Vec<Detection>) -> Vec<(Vector2<f64>, u64)> {
         let cfg = &self.cfg;
+        let first = out.len();
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
@@ -148,7 +176,14 @@ impl GeometricDetector {
                 self.last_cluster_points.push(idx);
             }
             trace_cluster(scene.now_ns, &f, s);
-            if s >= cfg.min_score {
+            if self.surveying {
+                if depth < cfg.max_planes && too_big(&f, cfg) {
+                    stack.extend(split(&grid, &cluster, cfg, depth));
+                }
+                self.last_clusters.push((f, s));
+                continue;
+            }
+            if s >= scene.min_score(cfg) {
                 confirmed_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
                 out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
                 self.last_clusters.push((f, s));
@@ -167,6 +202,9 @@ impl GeometricDetector {
             }
         }
         push_partial_views(partial, &confirmed_now, scene, cfg, out);
+        if scene.trees.is_some() {
+            keep_separate(out, first, cfg.trees.min_separation_m);
+        }
         confirmed_now
     }
 }
@@ -192,15 +230,32 @@ struct Scene<'s, 'w> {
     floor: FloorModel,
     /// Height above the floor where the ceiling band starts (`f64::MAX` without a ceiling).
     top: f64,
+    /// The learned scorer, when it replaces the posture gates (nobody is followed then).
+    trees: Option<&'s TreeModel>,
 }
 
 impl<'s, 'w> Scene<'s, 'w> {
-    fn new(window: &'s DetectWindow<'w>, cfg: &DetectConfig, followed: &[(Vector2<f64>, u64)]) -> Self {
+    fn new(
+        window: &'s DetectWindow<'w>,
+        cfg: &DetectConfig,
+        followed: &[(Vector2<f64>, u64)],
+        trees: Option<&'s TreeModel>,
+    ) -> Self {
         let tracks = tracks(followed, cfg.follow_radius_m, cfg.follow_walk_mps);
         let sensor = window.sensor_pose.translation.vector;
         let floor = estimate_floor(window.points, sensor.z, cfg);
         let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
-        Self { window, now_ns: window.stamp.ns, follow_ns: follow_ns(cfg), tracks, sensor, floor, top }
+        let follow_ns = if trees.is_some() { 0 } else { follow_ns(cfg) };
+        Self { window, now_ns: window.stamp.ns, follow_ns, tracks, sensor, floor, top, trees }
+    }
+
+    /// The score a person needs: the trees' probability or the gates' score.
+    fn min_score(&self, cfg: &DetectConfig) -> f64 {
+        if self.trees.is_some() {
+            cfg.trees.min_score
+        } else {
+            cfg.min_score
+        }
     }
 
     /// Whether someone every gate confirmed often and lately may have walked to `xy` by now.
@@ -245,10 +300,10 @@ impl<'s, 'w> Scene<'s, 'w> {
         envelope: &mut Option<FovEnvelope>,
     ) -> Option<(ClusterFeatures, PersonPose, f64)> {
         let sensor_xy = [self.sensor.x, self.sensor.y];
-        let worth_faces = |f: &ClusterFeatures| keep_all || self.worth_faces(f, cfg);
+        let worth_faces = |f: &ClusterFeatures| keep_all || self.trees.is_some() || self.worth_faces(f, cfg);
         let f = features(grid, cluster, &|i| self.above_floor(i), sensor_xy, cfg.face_tolerance_m, &worth_faces)?;
         let (pose, mut s) = self.posture_score(grid, cluster, &f, cfg);
-        if may_be_cut(&f, pose, s, cfg) {
+        if may_be_cut(&f, pose, s >= self.min_score(cfg), cfg) {
             let env = envelope.get_or_insert_with(|| {
                 FovEnvelope::new(self.window.points, &self.window.sensor_pose, self.window.stamp.ns)
             });
@@ -268,8 +323,14 @@ impl<'s, 'w> Scene<'s, 'w> {
         f: &ClusterFeatures,
         cfg: &DetectConfig,
     ) -> (PersonPose, f64) {
-        let (mut pose, mut s) = score(f, cfg);
         let structure = self.is_structure(f);
+        if let Some(model) = self.trees {
+            let points: Vec<Vector3<f64>> =
+                grid.points_of_cluster(cluster).filter_map(|i| self.above_floor(i)).collect();
+            let (pose, s) = trees::score(model, f, &points);
+            return (pose, if structure { 0.0 } else { s });
+        }
+        let (mut pose, mut s) = score(f, cfg);
         if structure {
             s = 0.0;
         }
@@ -335,9 +396,9 @@ fn enough_to_score(grid: &Grid, cluster: &[u32], cfg: &DetectConfig) -> bool {
 /// Whether a candidate's height may be the field of view's rather than its own: cut by the top
 /// of the view, only a cluster already as tall as a standing person can be one (checked for
 /// candidates only: the check costs a transform per point).
-fn may_be_cut(f: &ClusterFeatures, pose: PersonPose, s: f64, cfg: &DetectConfig) -> bool {
+fn may_be_cut(f: &ClusterFeatures, pose: PersonPose, candidate: bool, cfg: &DetectConfig) -> bool {
     let short_of_upright = pose != PersonPose::Upright || f.size.z < cfg.upright_height_m[0];
-    s >= cfg.min_score && pose != PersonPose::Lying && short_of_upright && cfg.fov_edge_margin_deg > 0.0
+    candidate && pose != PersonPose::Lying && short_of_upright && cfg.fov_edge_margin_deg > 0.0
 }
 
 /// A cluster's silhouette and point indices, kept for tuning the scorer.
@@ -383,6 +444,21 @@ fn push_partial_views(
             out.push(detection(scene.window, &scene.floor, &f, pose, s, idx.into_iter(), cfg));
         }
     }
+}
+
+/// Of the detections from `out[first..]`, keeps only the likeliest of any closer than
+/// `min_separation_m` over the floor (pieces of one body split by the clustering).
+fn keep_separate(out: &mut Vec<Detection>, first: usize, min_separation_m: f64) {
+    let Some(mine) = out.get_mut(first..) else { return };
+    mine.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut kept: Vec<Detection> = Vec::with_capacity(mine.len());
+    for d in out.drain(first..) {
+        let apart = |k: &Detection| (k.centre_m.xy() - d.centre_m.xy()).norm() >= min_separation_m;
+        if kept.iter().all(apart) {
+            kept.push(d);
+        }
+    }
+    out.extend(kept);
 }
 
 /// A person's box from their cluster: one whose feet are at the floor band stands on the floor.

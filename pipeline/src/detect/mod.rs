@@ -33,8 +33,9 @@ mod fov;
 mod geometric;
 mod occlusion;
 pub mod pillars;
+pub mod trees;
 
-pub use config::{DetectConfig, DetectorKind, PillarsConfig};
+pub use config::{DetectConfig, DetectorKind, PillarsConfig, TreesConfig};
 pub use features::ClusterFeatures;
 pub use floor::{estimate_floor, FloorModel};
 pub use geometric::GeometricDetector;
@@ -136,7 +137,7 @@ pub trait Detector {
 /// The detector `cfg.kind` names.
 pub fn make_detector(cfg: &DetectConfig) -> Result<Box<dyn Detector + Send>, crate::PipelineError> {
     Ok(match cfg.kind {
-        DetectorKind::Geometric => Box::new(GeometricDetector::new(cfg.clone())?),
+        DetectorKind::Geometric | DetectorKind::Trees => Box::new(GeometricDetector::new(cfg.clone())?),
         DetectorKind::Pointpillars => Box::new(pillars::PillarsDetector::new(cfg)?),
     })
 }

@@ -8,6 +8,12 @@ use super::*;
 use nalgebra::{Isometry3, Vector3};
 use starc_time::{Clock, Stamp};
 
+/// The hand-set gates (the default detector is the trees since 2026-11-28; these tests are the
+/// gates').
+fn gates() -> DetectConfig {
+    DetectConfig { kind: super::DetectorKind::Geometric, ..DetectConfig::default() }
+}
+
 fn push(out: &mut Vec<WindowPoint>, x: f64, y: f64, z: f64) {
     out.push(WindowPoint { x_m: x as f32, y_m: y as f32, z_m: z as f32, t_ns: 0 });
 }
@@ -69,7 +75,7 @@ fn window(points: &[WindowPoint]) -> DetectWindow<'_> {
 
 /// The scene through a detector with the default config: the detector and what it found.
 fn detect_scene(points: &[WindowPoint]) -> (GeometricDetector, Vec<Detection>) {
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let mut found = Vec::new();
     det.detect(&window(points), &mut found);
     (det, found)
@@ -112,7 +118,7 @@ fn the_floor_is_found_wherever_the_map_puts_it() {
     // The same scene 3 m higher (a map whose origin is below the floor), slightly tilted.
     let points: Vec<WindowPoint> =
         scene().into_iter().map(|p| WindowPoint { z_m: p.z_m + 3.0 + 0.01 * p.x_m, ..p }).collect();
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let mut found = Vec::new();
     let w = DetectWindow { sensor_pose: Isometry3::translation(0.0, 0.0, 3.45), ..window(&points) };
     det.detect(&w, &mut found);
@@ -123,7 +129,7 @@ fn the_floor_is_found_wherever_the_map_puts_it() {
 
 #[test]
 fn empty_and_garbage_windows_give_nothing_and_do_not_panic() {
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let mut found = Vec::new();
     det.detect(&window(&[]), &mut found);
     assert!(found.is_empty());
@@ -139,6 +145,12 @@ fn the_shipped_config_loads_and_bad_ones_are_refused() {
     let shipped = DetectConfig::from_toml(include_str!("../../../config/detect.toml")).unwrap();
     assert_eq!(shipped, DetectConfig::default(), "config/detect.toml documents the defaults");
     assert_eq!(DetectConfig::from_toml("").unwrap(), DetectConfig::default());
+    assert!(DetectConfig::from_toml("[trees]\nmin_score = 1.5").is_err());
+    assert!(DetectConfig::from_toml("[trees]\nmin_separation_m = -1.0").is_err());
+    assert!(
+        DetectConfig::from_toml("[trees]\nmodel = \"/nonexistent.stpw\"").is_ok(),
+        "read when the detector is made"
+    );
     assert!(DetectConfig::from_toml("voxel_size = 0.1").is_err(), "unknown keys are refused");
     assert!(DetectConfig::from_toml("voxel_m = 0.0").is_err());
     assert!(DetectConfig::from_toml("floor_bin_m = 1e-9").is_err());
@@ -203,7 +215,7 @@ fn matching_counts_hits_duplicates_misses_and_hidden_people() {
 
 #[test]
 fn random_windows_never_panic_and_indices_stay_in_range() {
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let mut found = Vec::new();
     let mut seed = 7u64;
     let mut next = || {
@@ -290,27 +302,27 @@ fn a_followed_person_may_shrink_to_a_flat_sliver_but_is_not_found_twice() {
     for z in [[0.3, 1.0], [1.3, 1.9]] {
         let mut alone = room(true);
         sliver(&mut alone, 3.0, 0.0, z);
-        let refused = detect_at(&mut GeometricDetector::new(DetectConfig::default()).unwrap(), alone, t);
+        let refused = detect_at(&mut GeometricDetector::new(gates()).unwrap(), alone, t);
         assert!(refused.is_empty(), "alone, a sliver is structure: {refused:#?}");
     }
     let mut alone = room(true);
     sliver(&mut alone, 3.0, 0.0, [0.3, 1.0]);
 
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let t = confirmed_crouching(&mut det);
     let found = detect_at(&mut det, alone, t);
     assert_eq!(found.len(), 1, "where someone was confirmed, it is a partial view of them: {found:#?}");
     assert!((found[0].centre_m.x - 3.0).abs() < 0.1 && found[0].centre_m.y.abs() < 0.1);
 
     // Not 0.7 m from where they sat still: that is the furniture beside them.
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let t = confirmed_crouching(&mut det);
     let mut aside = room(true);
     sliver(&mut aside, 3.0, 0.7, [0.3, 1.0]);
     assert!(detect_at(&mut det, aside, t).is_empty());
 
     // Whole again, with a second cluster over them (a raised arm, say): one person.
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let t = confirmed_crouching(&mut det);
     let mut both = room(true);
     crouching_person(&mut both);
@@ -328,10 +340,10 @@ fn a_followed_person_may_shrink_to_their_head_but_not_to_a_lectern_top() {
     let t = 1_000_000_000;
     let mut alone = room(true);
     head(&mut alone);
-    let fresh = detect_at(&mut GeometricDetector::new(DetectConfig::default()).unwrap(), alone.clone(), t);
+    let fresh = detect_at(&mut GeometricDetector::new(gates()).unwrap(), alone.clone(), t);
     assert!(fresh.is_empty(), "alone, a head-sized blob is no one: {fresh:#?}");
 
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let t = confirmed_crouching(&mut det);
     let found = detect_at(&mut det, alone, t);
     assert_eq!(found.len(), 1, "{found:#?}");
@@ -343,7 +355,7 @@ fn a_followed_person_may_shrink_to_their_head_but_not_to_a_lectern_top() {
         grid(&mut lectern, [2.9, 3.25], [-0.3, 0.3], 0.03, |x, v| [x, v, z]);
     }
     grid(&mut lectern, [-0.3, 0.3], [0.87, 1.07], 0.03, |v, h| [2.9, v, h]);
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let t = confirmed_crouching(&mut det);
     let found = detect_at(&mut det, lectern, t);
     assert!(found.is_empty(), "{found:#?}");
@@ -362,12 +374,12 @@ fn a_confirmed_person_is_followed_into_a_partial_view_for_a_while() {
     const S: u64 = 1_000_000_000;
     // Alone, the crouching person's top is the top of the view: their height is unknown, and
     // a 1 m cluster cut by the view is taken for no one.
-    let mut fresh = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut fresh = GeometricDetector::new(gates()).unwrap();
     assert!(crouching_found(&mut fresh, true, S), "seen whole in front of a wall");
-    assert!(!crouching_found(&mut GeometricDetector::new(DetectConfig::default()).unwrap(), false, S));
+    assert!(!crouching_found(&mut GeometricDetector::new(gates()).unwrap(), false, S));
 
     // Confirmed five times (0.1 s apart), then cut: still them.
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     for k in 0..5 {
         assert!(crouching_found(&mut det, true, S + k * S / 10));
     }
@@ -381,14 +393,14 @@ fn a_confirmed_person_is_followed_into_a_partial_view_for_a_while() {
 
     // One confirmation fewer than `follow_min_confirmations` is not enough (the auditorium's
     // door jamb passed every gate three times), and following can be turned off.
-    let n = DetectConfig::default().follow_min_confirmations as u64;
+    let n = gates().follow_min_confirmations as u64;
     assert_eq!(n, 4, "the shipped setting these windows are counted for");
-    let mut fewer = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut fewer = GeometricDetector::new(gates()).unwrap();
     for k in 0..n - 1 {
         assert!(crouching_found(&mut fewer, true, S + k * S / 10));
     }
     assert!(!crouching_found(&mut fewer, false, S + (n - 1) * S / 10));
-    let off = DetectConfig { follow_s: 0.0, ..DetectConfig::default() };
+    let off = DetectConfig { follow_s: 0.0, ..gates() };
     let mut unfollowed = GeometricDetector::new(off).unwrap();
     for k in 0..5 {
         assert!(crouching_found(&mut unfollowed, true, S + k * S / 10));
@@ -434,7 +446,7 @@ fn a_smeared_wall_end_is_all_faces_and_no_one() {
         }
         v += 0.02;
     }
-    let mut det = GeometricDetector::new(DetectConfig::default()).unwrap();
+    let mut det = GeometricDetector::new(gates()).unwrap();
     let mut found = Vec::new();
     det.detect(&window(&p), &mut found);
     assert!(found.is_empty(), "{found:#?}");
@@ -461,7 +473,7 @@ fn a_followed_lying_person_may_be_shorter_than_a_lying_person_alone() {
         thickness_m: 0.03,
         range_m: 5.0,
     };
-    let cfg = DetectConfig::default();
+    let cfg = gates();
     assert!(score(&f, &cfg).1 < cfg.min_score, "{:?}", score(&f, &cfg));
     assert_eq!(score_followed(&f, &cfg).0, PersonPose::Lying);
     assert!(score_followed(&f, &cfg).1 >= cfg.min_score);
@@ -529,7 +541,7 @@ fn head_and_shoulders_over_boxes_are_someone_and_the_same_sliver_in_the_open_is_
     assert!(found.iter().all(|d| (d.centre_m.x - 5.0).abs() > 0.5), "{found:#?}");
 
     // With the check off, the sliver alone is structure (all faces, thinner than 2 cm).
-    let off = DetectConfig { behind_min_edge_share: 0.0, ..DetectConfig::default() };
+    let off = DetectConfig { behind_min_edge_share: 0.0, ..gates() };
     let mut det = GeometricDetector::new(off).unwrap();
     let mut found = Vec::new();
     det.detect(&window(&behind_boxes(true)), &mut found);

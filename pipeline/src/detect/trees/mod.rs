@@ -1,0 +1,46 @@
+//! The learned scorer of the geometric detector's clusters (`[detect] kind = "trees"`):
+//! gradient-boosted trees over a cluster's features and shape profile, trained on development
+//! buildings by scripts/train/cluster_trees.py, in place of the hand-set posture gates.
+
+pub mod inputs;
+pub mod model;
+
+pub use inputs::{input_names, inputs, INPUTS};
+pub use model::{TreeModel, CLASSES};
+
+use super::{ClusterFeatures, PersonPose, TreesConfig};
+use crate::detect::pillars::weights::Weights;
+use crate::PipelineError;
+use nalgebra::Vector3;
+
+const BUILT_IN: &[u8] = include_bytes!("../../../../config/models/cluster_trees.stpw");
+
+/// The trees `cfg.model` names, or the built-in ones.
+pub fn load(cfg: &TreesConfig) -> Result<TreeModel, PipelineError> {
+    let bytes = match &cfg.model {
+        Some(path) => std::fs::read(path).map_err(|e| PipelineError::io(format!("reading {}", path.display()), e))?,
+        None => BUILT_IN.to_vec(),
+    };
+    TreeModel::from_weights(&Weights::parse(&bytes)?)
+}
+
+/// The likeliest posture of a cluster and its probability of being a person at all.
+pub fn score(model: &TreeModel, f: &ClusterFeatures, points: &[Vector3<f64>]) -> (PersonPose, f64) {
+    let p = model.predict(&inputs(f, points));
+    let postures = [(PersonPose::Upright, p[1]), (PersonPose::Low, p[2]), (PersonPose::Lying, p[3])];
+    let best = postures.iter().copied().fold((PersonPose::Upright, f32::MIN), |a, b| if b.1 > a.1 { b } else { a });
+    (best.0, f64::from(1.0 - p[0]))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_built_in_trees_load() {
+        let m = load(&TreesConfig::default()).unwrap();
+        let p = m.predict(&[0.0; INPUTS]);
+        assert!((p.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+    }
+}
