@@ -300,7 +300,11 @@ impl<'s, 'w> Scene<'s, 'w> {
         envelope: &mut Option<FovEnvelope>,
     ) -> Option<(ClusterFeatures, PersonPose, f64)> {
         let sensor_xy = [self.sensor.x, self.sensor.y];
-        let worth_faces = |f: &ClusterFeatures| keep_all || self.trees.is_some() || self.worth_faces(f, cfg);
+        let worth_faces = |f: &ClusterFeatures| match self.trees {
+            _ if keep_all => true,
+            Some(_) => trees::worth_scoring(f),
+            None => self.worth_faces(f, cfg),
+        };
         let f = features(grid, cluster, &|i| self.above_floor(i), sensor_xy, cfg.face_tolerance_m, &worth_faces)?;
         let (pose, mut s) = self.posture_score(grid, cluster, &f, cfg);
         if may_be_cut(&f, pose, s >= self.min_score(cfg), cfg) {
@@ -325,6 +329,9 @@ impl<'s, 'w> Scene<'s, 'w> {
     ) -> (PersonPose, f64) {
         let structure = self.is_structure(f);
         if let Some(model) = self.trees {
+            if !trees::worth_scoring(f) {
+                return (PersonPose::Upright, 0.0);
+            }
             let points: Vec<Vector3<f64>> =
                 grid.points_of_cluster(cluster).filter_map(|i| self.above_floor(i)).collect();
             let (pose, s) = trees::score(model, f, &points);

@@ -24,8 +24,23 @@ pub fn load(cfg: &TreesConfig) -> Result<TreeModel, PipelineError> {
     TreeModel::from_weights(&Weights::parse(&bytes)?)
 }
 
-/// The likeliest posture of a cluster and its probability of being a person at all.
+/// Clusters longer or wider than this are not shown to the trees (nor is their face share, the
+/// costliest feature, measured): on the validation buildings the trees took none of the 5,484
+/// such clusters for a person, and they hold most of a window's points.
+const MAX_LENGTH_M: f64 = 3.0;
+const MAX_WIDTH_M: f64 = 1.5;
+
+/// Whether the trees judge a cluster of this size at all (else it is no person).
+pub fn worth_scoring(f: &ClusterFeatures) -> bool {
+    f.size.x <= MAX_LENGTH_M && f.size.y <= MAX_WIDTH_M
+}
+
+/// The likeliest posture of a cluster and its probability of being a person at all (0 for a
+/// cluster too big to be shown to the trees).
 pub fn score(model: &TreeModel, f: &ClusterFeatures, points: &[Vector3<f64>]) -> (PersonPose, f64) {
+    if !worth_scoring(f) {
+        return (PersonPose::Upright, 0.0);
+    }
     let p = model.predict(&inputs(f, points));
     let postures = [(PersonPose::Upright, p[1]), (PersonPose::Low, p[2]), (PersonPose::Lying, p[3])];
     let best = postures.iter().copied().fold((PersonPose::Upright, f32::MIN), |a, b| if b.1 > a.1 { b } else { a });
