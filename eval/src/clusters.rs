@@ -4,9 +4,8 @@
 //! and what the simulator's truth says it is. Made from the mission's own windows (the robot's
 //! LIO, its world frame, its floor and ceiling), so the scorer learns what it will be shown.
 
-use nalgebra::Vector3;
 use starc_pipeline::detect::eval::TruthPerson;
-use starc_pipeline::detect::trees::{inputs, INPUTS};
+use starc_pipeline::detect::trees::INPUTS;
 use starc_pipeline::detect::{DetectConfig, DetectWindow, Detector, DetectorKind, GeometricDetector};
 use std::collections::HashMap;
 
@@ -45,17 +44,9 @@ pub fn survey_window(
 ) {
     let mut found = Vec::new();
     det.detect(window, &mut found);
-    let Some(floor) = det.last_floor() else { return };
-    for ((f, score), idx) in det.last_clusters().iter().zip(det.last_cluster_points()) {
-        let pts: Vec<Vector3<f64>> = idx
-            .iter()
-            .filter_map(|&i| window.points.get(i as usize))
-            .map(|p| {
-                let q = p.xyz();
-                Vector3::new(q.x, q.y, floor.height(q.x, q.y, q.z))
-            })
-            .collect();
-        rows.extend(inputs(f, &pts));
+    let clusters = det.last_clusters().iter().zip(det.last_cluster_points()).zip(det.last_inputs());
+    for (((f, score), idx), x) in clusters {
+        rows.extend(x);
         rows.extend(truth_columns(idx, labels, people, [f.centre.x, f.centre.y]));
         rows.extend([window_index as f32, f.centre.x as f32, f.centre.y as f32, *score as f32]);
     }
@@ -89,6 +80,7 @@ fn truth_columns(idx: &[u32], labels: &[u16], people: &[LabelledPerson<'_>], cen
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use nalgebra::Vector3;
     use starc_pipeline::detect::WindowPoint;
     use starc_time::{Clock, Stamp};
 

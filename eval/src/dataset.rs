@@ -147,20 +147,21 @@ fn add_window(
     let boxes_now = people_at(&truth.people, d.stamp_ns);
     let people = truth_in_world(&boxes_now, l_t_w, &d.points, Some(&truth.returns));
     let index = (arrays.windows.len() / 2) as f32;
+    let labels: Vec<u16> = d.points.iter().map(|p| person_label(p, &people, &frame)).collect();
     if let Some(det) = arrays.surveyor.as_mut() {
-        let labels: Vec<u16> = d.points.iter().map(|p| person_label(p, &people, &frame)).collect();
         let labelled: Vec<LabelledPerson<'_>> =
             people.iter().zip(&boxes_now).map(|(t, b)| LabelledPerson { truth: t, posture: posture(b.pose) }).collect();
         survey_window(det, &window, &labels, &labelled, index as usize, &mut arrays.clusters);
     }
     let first = arrays.labels.len() as i64;
-    for p in d.points.iter().filter(|_| opts.points) {
-        let m = frame.point_to_model(p);
-        if !kept(m) {
-            continue;
+    if opts.points {
+        for (p, &label) in d.points.iter().zip(&labels) {
+            let m = frame.point_to_model(p);
+            if kept(m) {
+                arrays.points_cm.extend(m.map(|v| (v * 100.0).round() as i16));
+                arrays.labels.push(label);
+            }
         }
-        arrays.points_cm.extend(m.map(|v| (v * 100.0).round() as i16));
-        arrays.labels.push(person_label(p, &people, &frame));
     }
     arrays.windows.extend([first, arrays.labels.len() as i64 - first]);
     for (person, truth_box) in people.iter().zip(&boxes_now) {

@@ -37,6 +37,8 @@ pub struct GeometricDetector {
     /// When set, nobody is detected and every cluster too big for a person is split (training
     /// data for a learned scorer: every cluster any scorer could be shown).
     surveying: bool,
+    /// When surveying, the learned scorer's input vector of each of `last_clusters`.
+    last_inputs: Vec<[f32; trees::INPUTS]>,
     last_cluster_points: Vec<Vec<u32>>,
     last_silhouettes: Vec<Silhouette>,
 }
@@ -57,6 +59,7 @@ impl GeometricDetector {
             last_clusters: Vec::new(),
             keep_cluster_points: false,
             surveying: false,
+            last_inputs: Vec::new(),
             last_cluster_points: Vec::new(),
             last_silhouettes: Vec::new(),
         })
@@ -89,6 +92,12 @@ impl GeometricDetector {
         self.keep_cluster_points |= on;
     }
 
+    /// The learned scorer's input vector of each of [`Self::last_clusters`], when surveying (the
+    /// same the trees are given when they score).
+    pub fn last_inputs(&self) -> &[[f32; trees::INPUTS]] {
+        &self.last_inputs
+    }
+
     /// The points of each of [`Self::last_clusters`], when kept.
     pub fn last_cluster_points(&self) -> &[Vec<u32>] {
         &self.last_cluster_points
@@ -102,10 +111,9 @@ impl GeometricDetector {
 
 impl Detector for GeometricDetector {
     fn name(&self) -> &'static str {
-        if self.trees.is_some() {
-            "trees"
-        } else {
-            "geometric"
+        match self.cfg.kind {
+            DetectorKind::Trees => "trees",
+            _ => "geometric",
         }
     }
 
@@ -117,6 +125,7 @@ impl Detector for GeometricDetector {
         self.last_clusters.clear();
         self.last_cluster_points.clear();
         self.last_silhouettes.clear();
+        self.last_inputs.clear();
         let followed = self.take_followed(window.stamp.ns);
         // Lent to the window's scene while the clusters are judged, then put back.
         let trees = self.trees.take();
@@ -177,6 +186,7 @@ impl GeometricDetector {
             }
             trace_cluster(scene.now_ns, &f, s);
             if self.surveying {
+                self.last_inputs.push(scene.inputs(&grid, &cluster, &f));
                 if depth < cfg.max_planes && too_big(&f, cfg) {
                     stack.extend(split(&grid, &cluster, cfg, depth));
                 }
@@ -267,6 +277,13 @@ impl<'s, 'w> Scene<'s, 'w> {
         })
     }
 
+    /// The learned scorer's input vector of a cluster (its points with their height above the
+    /// floor).
+    fn inputs(&self, grid: &Grid, cluster: &[u32], f: &ClusterFeatures) -> [f32; trees::INPUTS] {
+        let points: Vec<Vector3<f64>> = grid.points_of_cluster(cluster).filter_map(|i| self.above_floor(i)).collect();
+        trees::inputs(f, &points)
+    }
+
     /// Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).
     fn is_structure(&self, f: &ClusterFeatures) -> bool {
         f.top_m > self.top - CEILING_CONTACT_M
@@ -300,10 +317,8 @@ impl<'s, 'w> Scene<'s, 'w> {
         envelope: &mut Option<FovEnvelope>,
     ) -> Option<(ClusterFeatures, PersonPose, f64)> {
         let sensor_xy = [self.sensor.x, self.sensor.y];
-        let worth_faces = |f: &ClusterFeatures| match self.trees {
-            _ if keep_all => true,
-            Some(_) => trees::worth_scoring(f),
-            None => self.worth_faces(f, cfg),
+        let worth_faces = |f: &ClusterFeatures| {
+            keep_all || self.trees.map_or_else(|| self.worth_faces(f, cfg), |_| trees::worth_scoring(f))
         };
         let f = features(grid, cluster, &|i| self.above_floor(i), sensor_xy, cfg.face_tolerance_m, &worth_faces)?;
         let (pose, mut s) = self.posture_score(grid, cluster, &f, cfg);
@@ -332,9 +347,7 @@ impl<'s, 'w> Scene<'s, 'w> {
             if !trees::worth_scoring(f) {
                 return (PersonPose::Upright, 0.0);
             }
-            let points: Vec<Vector3<f64>> =
-                grid.points_of_cluster(cluster).filter_map(|i| self.above_floor(i)).collect();
-            let (pose, s) = trees::score(model, f, &points);
+            let (pose, s) = trees::score(model, &self.inputs(grid, cluster, f));
             return (pose, if structure { 0.0 } else { s });
         }
         let (mut pose, mut s) = score(f, cfg);

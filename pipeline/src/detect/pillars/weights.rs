@@ -97,9 +97,14 @@ impl Weights {
         Ok(Self { tensors })
     }
 
+    /// The tensor called `name`.
+    pub fn tensor(&self, name: &str) -> Result<&Tensor, PipelineError> {
+        self.tensors.iter().find(|t| t.name == name).ok_or_else(|| bad(format!("no tensor {name}")))
+    }
+
     /// The tensor called `name`, which must have the shape `dims`.
     pub fn get(&self, name: &str, dims: &[usize]) -> Result<&[f32], PipelineError> {
-        let t = self.tensors.iter().find(|t| t.name == name).ok_or_else(|| bad(format!("no tensor {name}")))?;
+        let t = self.tensor(name)?;
         if t.dims != dims {
             return Err(bad(format!("{name} is {:?}, expected {dims:?}", t.dims)));
         }

@@ -17,39 +17,6 @@ pub const INPUTS: usize = BASE + PER_SLICE * SLICES;
 /// A feature that was not measured (a face share never computed) reads as this.
 const NOT_MEASURED: f32 = -1.0;
 
-/// The names of the inputs, in order (the training script and the docs print them).
-pub fn input_names() -> Vec<String> {
-    let mut names: Vec<String> = [
-        "log_points",
-        "log_voxels",
-        "length_m",
-        "width_m",
-        "height_m",
-        "bottom_m",
-        "top_m",
-        "face_share",
-        "top_share",
-        "linearity",
-        "planarity",
-        "thickness_m",
-        "range_m",
-        "points_times_range_sq",
-        "centroid_height_share",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    for i in 0..SLICES {
-        names.extend([
-            format!("slice{i}_share"),
-            format!("slice{i}_spread_length_m"),
-            format!("slice{i}_spread_width_m"),
-            format!("slice{i}_offset_from_top_m"),
-        ]);
-    }
-    names
-}
-
 /// The input vector of a cluster: `f` and its points (x, y in the world, z above the floor).
 pub fn inputs(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [f32; INPUTS] {
     let mut v = [0.0f32; INPUTS];
@@ -172,7 +139,6 @@ mod tests {
             pts.push(Vector3::new(1.0, 2.0, 1.5 - f64::from(i) * 0.01)); // a thin top
         }
         let v = inputs(&f, &pts);
-        assert_eq!(v.len(), input_names().len());
         let slice = |i: usize, k: usize| v[BASE + PER_SLICE * i + k];
         assert!((slice(0, 0) - 0.8).abs() < 1e-6, "bottom slice share {}", slice(0, 0));
         assert!(slice(0, 1) > 0.25, "bottom spread along the length {}", slice(0, 1));

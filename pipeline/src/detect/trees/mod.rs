@@ -5,13 +5,12 @@
 pub mod inputs;
 pub mod model;
 
-pub use inputs::{input_names, inputs, INPUTS};
+pub use inputs::{inputs, INPUTS};
 pub use model::{TreeModel, CLASSES};
 
 use super::{ClusterFeatures, PersonPose, TreesConfig};
 use crate::detect::pillars::weights::Weights;
 use crate::PipelineError;
-use nalgebra::Vector3;
 
 const BUILT_IN: &[u8] = include_bytes!("../../../../config/models/cluster_trees.stpw");
 
@@ -30,18 +29,16 @@ pub fn load(cfg: &TreesConfig) -> Result<TreeModel, PipelineError> {
 const MAX_LENGTH_M: f64 = 3.0;
 const MAX_WIDTH_M: f64 = 1.5;
 
-/// Whether the trees judge a cluster of this size at all (else it is no person).
+/// Whether the trees judge a cluster of this size at all (the detector calls one that is not no
+/// person without scoring it).
 pub fn worth_scoring(f: &ClusterFeatures) -> bool {
     f.size.x <= MAX_LENGTH_M && f.size.y <= MAX_WIDTH_M
 }
 
-/// The likeliest posture of a cluster and its probability of being a person at all (0 for a
-/// cluster too big to be shown to the trees).
-pub fn score(model: &TreeModel, f: &ClusterFeatures, points: &[Vector3<f64>]) -> (PersonPose, f64) {
-    if !worth_scoring(f) {
-        return (PersonPose::Upright, 0.0);
-    }
-    let p = model.predict(&inputs(f, points));
+/// The likeliest posture of a cluster and its probability of being a person at all, from its
+/// input vector.
+pub fn score(model: &TreeModel, x: &[f32; INPUTS]) -> (PersonPose, f64) {
+    let p = model.predict(x);
     let postures = [(PersonPose::Upright, p[1]), (PersonPose::Low, p[2]), (PersonPose::Lying, p[3])];
     let best = postures.iter().copied().fold((PersonPose::Upright, f32::MIN), |a, b| if b.1 > a.1 { b } else { a });
     (best.0, f64::from(1.0 - p[0]))

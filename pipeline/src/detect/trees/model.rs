@@ -103,8 +103,7 @@ impl TreeModel {
 }
 
 fn dims_of(w: &Weights, name: &str) -> Result<usize, PipelineError> {
-    let t = w.tensors.iter().find(|t| t.name == name).ok_or_else(|| bad(format!("no tensor {name}")))?;
-    match t.dims.as_slice() {
+    match w.tensor(name)?.dims.as_slice() {
         [n] if *n > 0 => Ok(*n),
         d => Err(bad(format!("{name} is {d:?}, expected one non-empty dimension"))),
     }
