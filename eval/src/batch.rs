@@ -164,6 +164,29 @@ pub fn markdown_table(summary: &Value) -> String {
     t
 }
 
+/// The alignment goal over the buildings, as a line: of the rig sessions that saw the robot's
+/// map, how many were placed right within 10 s of it, and how many accepted a wrong alignment.
+/// Sessions that never saw the map are counted apart (no registration could place them).
+pub fn alignment_goal(rows: &[Row]) -> String {
+    let scored: Vec<&Row> =
+        rows.iter().filter(|r| r.figures.contains_key("alignment.map_sight.seconds_judged")).collect();
+    let saw: Vec<&&Row> =
+        scored.iter().filter(|r| r.figures.contains_key("alignment.map_sight.sees_map_after_s")).collect();
+    let in_time = saw.iter().filter(|r| r.figures.get("alignment.map_sight.right_within_10s") == Some(&1.0)).count();
+    let wrong = |r: &Row| r.figures.get("alignment.accepted_wrong").copied().unwrap_or(0.0);
+    let wrong_total: f64 = scored.iter().map(|r| wrong(r)).sum();
+    let wrong_buildings = scored.iter().filter(|r| wrong(r) > 0.0).count();
+    let rate =
+        if saw.is_empty() { "-".to_string() } else { format!("{:.0} %", 100.0 * in_time as f64 / saw.len() as f64) };
+    format!(
+        "rig aligned right within 10 s of first seeing the robot's map: {in_time} of {} sessions that saw it ({rate}); \
+         {} of {} never saw it; {wrong_total:.0} wrong alignments accepted, in {wrong_buildings} buildings",
+        saw.len(),
+        scored.len() - saw.len(),
+        scored.len()
+    )
+}
+
 /// One SVG per headline figure: each building a dot, by family, with the median as a line.
 pub fn write_plots(rows: &[Row], dir: &Path) -> Result<usize> {
     std::fs::create_dir_all(dir).map_err(|source| crate::EvalError::Write { path: dir.to_path_buf(), source })?;
@@ -251,6 +274,33 @@ fn strip_plot(title: &str, count: usize, points: &[(usize, &str, f64)]) -> Strin
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_alignment_goal_counts_only_sessions_that_saw_the_map() {
+        let row = |figures: &[(&str, f64)]| {
+            let f = figures.iter().map(|(k, v)| (k.to_string(), *v)).collect();
+            Row::new(1000, Family::Flat, 1, 30.0, f)
+        };
+        let judged = ("alignment.map_sight.seconds_judged", 20.0);
+        let rows = [
+            row(&[
+                judged,
+                ("alignment.map_sight.sees_map_after_s", 3.0),
+                ("alignment.map_sight.right_within_10s", 1.0),
+            ]),
+            row(&[
+                judged,
+                ("alignment.map_sight.sees_map_after_s", 5.0),
+                ("alignment.map_sight.right_within_10s", 0.0),
+            ]),
+            row(&[judged, ("alignment.accepted_wrong", 2.0)]),
+            row(&[("detection.recall", 0.5)]),
+        ];
+        let line = alignment_goal(&rows);
+        assert!(line.contains("1 of 2 sessions that saw it (50 %)"), "{line}");
+        assert!(line.contains("1 of 3 never saw it"), "{line}");
+        assert!(line.contains("2 wrong alignments accepted, in 1 buildings"), "{line}");
+    }
 
     #[test]
     fn flatten_keys_every_number_by_its_path() {

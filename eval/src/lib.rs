@@ -30,6 +30,7 @@ pub mod dataset;
 pub mod detection;
 pub mod drift;
 pub mod error;
+pub mod map_sight;
 pub mod offline;
 pub mod overlay;
 pub mod plots;
@@ -44,8 +45,8 @@ pub mod wheels;
 pub use error::{EvalError, Result};
 pub use quantiles::{quantiles, Quantiles};
 pub use report::{
-    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MemoryReport, OverlayReport, PoseErrorReport,
-    Report, RobotPoseErrorReport,
+    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MapSightReport, MemoryReport, OverlayReport,
+    PoseErrorReport, Report, RobotPoseErrorReport,
 };
 pub use score::Scorer;
 pub use summary::summary;

@@ -7,10 +7,11 @@ use crate::{quantiles, summary, LatencyReport, MemoryReport, Quantiles, Scorer, 
 use crate::{EvalError, Result};
 use nalgebra::Isometry3;
 use starc_hil::tum::tum_line;
+use starc_pipeline::align::AlignConfig;
 use starc_pipeline::ar::{CameraModel, RenderConfig};
 use starc_pipeline::mission::{
     AlignVerdict, MissionEvent, MissionInput, OfflineMission, RigCoreConfig, RigSide, RigSideConfig, RobotCore,
-    RobotCoreConfig, HOLD_NS,
+    RobotCoreConfig, Side, HOLD_NS,
 };
 use starc_pipeline::timing::{peak_rss_mib, Stopwatch};
 use std::path::{Path, PathBuf};
@@ -43,6 +44,8 @@ pub struct Offline {
     pub coverage: bool,
     /// The robot's core (its LIO, detector and the filters on what it sends).
     pub robot: RobotCoreConfig,
+    /// The rig's first-alignment search (`RigCoreConfig::align`; `--align-config`).
+    pub rig_align: AlignConfig,
     /// With the simulator's truth: the camera frames rendered and scored into report.json.
     /// Without: a frame after every rig scan, and replay.json with what needs no truth.
     pub truth: Option<Truth>,
@@ -69,6 +72,7 @@ impl Offline {
             confirm_first_s: starc_pipeline::mission::CONFIRM_FIRST_S,
             coverage: true,
             robot: RobotCoreConfig::default(),
+            rig_align: RigCoreConfig::default().align,
             truth: Some(truth),
             wall_timing,
             align: true,
@@ -103,6 +107,7 @@ pub fn run<E: std::fmt::Display>(
     let mut events = Vec::new();
     for input in inputs {
         let input = input.map_err(|e| EvalError::Input(e.to_string()))?;
+        state.score_rig_scan(&input);
         state.mission.push(input, &mut events);
         for ev in events.drain(..) {
             state.take(ev);
@@ -142,9 +147,10 @@ impl Run {
         let pipeline = |source| EvalError::Pipeline { path: cfg.out.clone(), source };
         let stopwatch = Stopwatch::wall_if(cfg.wall_timing);
         let robot_cfg = cfg.robot.clone().with_stopwatch(stopwatch);
-        let core = RigCoreConfig { start_gate_m: cfg.start_gate_m, ..RigCoreConfig::default() }
-            .with_confirm_first_s(cfg.confirm_first_s)
-            .with_stopwatch(stopwatch);
+        let core =
+            RigCoreConfig { start_gate_m: cfg.start_gate_m, align: cfg.rig_align.clone(), ..RigCoreConfig::default() }
+                .with_confirm_first_s(cfg.confirm_first_s)
+                .with_stopwatch(stopwatch);
         let rig_cfg = RigSideConfig {
             core,
             camera: cfg.camera.clone(),
@@ -227,6 +233,16 @@ impl Run {
                 }
             }
         }
+    }
+
+    /// A rig scan for the scorer's measure of when the rig first sees the robot's map.
+    fn score_rig_scan(&mut self, input: &MissionInput) {
+        let (MissionInput::Scan(Side::Rig, scan), Some(sc), true) = (input, self.score.as_mut(), self.cfg.align) else {
+            return;
+        };
+        let robot = self.mission.robot_mut();
+        let len = robot.map_len();
+        sc.rig_scan(scan, len, || robot.map_points());
     }
 
     /// `--hint truth`: the rig's start from the truth, once the robot's first pose has tied the

@@ -105,6 +105,29 @@ pub struct AlignmentReport {
     /// The first accepted alignment's error against the truth.
     pub first_error_m: Option<f64>,
     pub first_error_deg: Option<f64>,
+    /// The first accepted alignment within 10 cm and 1 deg of the truth, after the rig's LIO
+    /// started (s); null if none.
+    pub first_right_after_s: Option<f64>,
+    /// Accepted alignments (first ones and re-registrations) more than 10 cm or 1 deg off.
+    pub accepted_wrong: usize,
+    /// When the rig's view first lay on the robot's map, and whether it was placed in time.
+    pub map_sight: MapSightReport,
+}
+
+/// The rig's view against the robot's map at the rig's true pose, per second of its run
+/// (`starc_eval::map_sight`): a second sees the map when at least 30 % of at least 100 sampled
+/// returns lie within 0.3 m of it.
+#[derive(Debug, Serialize)]
+pub struct MapSightReport {
+    /// The first second (since the rig's LIO started) that saw the map; null if none did.
+    pub sees_map_after_s: Option<f64>,
+    /// The largest share of a second's returns on the map.
+    pub best_share: f64,
+    pub seconds_judged: usize,
+    pub seconds_seeing_map: usize,
+    /// The goal: a right alignment (10 cm, 1 deg) within 10 s of `sees_map_after_s`; null
+    /// when the rig never saw the map.
+    pub right_within_10s: Option<bool>,
 }
 
 #[derive(Debug, Serialize)]

@@ -12,19 +12,20 @@ use crate::ap::{class_of_pose, ApTally};
 use crate::detection::{box_returns, truth_in_world};
 use crate::drift::{drift_stretches, DriftReport, ScoredPose};
 use crate::error::{write, EvalError, Result};
+use crate::map_sight::MapSight;
 use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
 use crate::plots::write_plots;
 use crate::quantiles::quantiles;
 use crate::report::{
-    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MemoryReport, PoseErrorReport, PosePrecision,
-    PoseRecall, Report, RobotPoseErrorReport,
+    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MapSightReport, MemoryReport, PoseErrorReport,
+    PosePrecision, PoseRecall, Report, RobotPoseErrorReport,
 };
 use crate::truth::{at, people_at, CameraFrame, PersonBox, TruePose, Truth};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector3};
 use starc_pipeline::align::pose_error;
 use starc_pipeline::ar::{self, ProjectedPoint};
 use starc_pipeline::detect::eval::{match_window, Counts, MatchRule, TruthPerson, WindowMatch};
-use starc_pipeline::lio::Health;
+use starc_pipeline::lio::{Health, LioScan};
 use starc_pipeline::mission::{RobotDetection, View};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
@@ -33,6 +34,12 @@ use std::path::Path;
 /// odometry issue's test: every such stretch must be flagged degraded or worse).
 const DRIFT_GROW_M: f64 = 0.10;
 const DRIFT_WINDOW_NS: u64 = 5_000_000_000;
+/// An accepted alignment this close to the truth is right (the alignment issue's goal); any
+/// other accepted one is wrong.
+const RIGHT_M: f64 = 0.10;
+const RIGHT_DEG: f64 = 1.0;
+/// ... and the goal's time: right within this long of the rig first seeing the robot's map.
+const RIGHT_WITHIN_NS: u64 = 10_000_000_000;
 
 /// A camera frame whose overlay waits for the robot's detections to pass its time.
 struct PendingFrame {
@@ -58,6 +65,10 @@ pub struct Scorer {
     accepted: usize,
     align_ms: Vec<f64>,
     first_accept: Option<(u64, f64, f64)>,
+    /// The first right accepted alignment, after the rig started (ns).
+    first_right_ns: Option<u64>,
+    accepted_wrong: usize,
+    sight: MapSight,
     in_mask: usize,
     in_image: usize,
     true_in_mask: usize,
@@ -96,6 +107,9 @@ impl Scorer {
             accepted: 0,
             align_ms: Vec::new(),
             first_accept: None,
+            first_right_ns: None,
+            accepted_wrong: 0,
+            sight: MapSight::default(),
             in_mask: 0,
             in_image: 0,
             true_in_mask: 0,
@@ -149,6 +163,18 @@ impl Scorer {
     /// The rig's first LIO pose (alignment times count from it).
     pub fn rig_started(&mut self, first_ns: u64) {
         self.rig_first_ns.get_or_insert(first_ns);
+    }
+
+    /// One rig scan, to find when the rig first sees the robot's map ([`crate::map_sight`]);
+    /// `map` gives the robot's map (its LIO world) as it stands, asked for only when it changed.
+    pub fn rig_scan(&mut self, scan: &LioScan, map_len: usize, map: impl FnOnce() -> Vec<Vector3<f64>>) {
+        let (Some(first), Some(l_t_w)) = (self.rig_first_ns, self.lio_t_world) else { return };
+        let Some(since_ns) = scan.end_ns.checked_sub(first) else { return };
+        if self.sight.wants_map(map_len, scan.end_ns) {
+            self.sight.set_map(map(), scan.end_ns);
+        }
+        let gt_fpv = &self.truth.gt_fpv;
+        self.sight.scan(scan, since_ns / 1_000_000_000, |t| l_t_w * at(gt_fpv, t));
     }
 
     /// One detection window of the robot, matched against the true people.
@@ -241,9 +267,12 @@ impl Scorer {
         if let Some(l_t_w) = &self.lio_t_world {
             let (m, deg) = pose_error(world_t_lidar, &(l_t_w * at(&self.truth.gt_fpv, end_ns)));
             tracing::info!(error_m = m, error_deg = deg, "rig alignment accepted");
-            if self.first_accept.is_none() {
-                let first = self.rig_first_ns.unwrap_or(end_ns);
-                self.first_accept = Some((end_ns.saturating_sub(first), m, deg));
+            let since_ns = end_ns.saturating_sub(self.rig_first_ns.unwrap_or(end_ns));
+            self.first_accept.get_or_insert((since_ns, m, deg));
+            if m <= RIGHT_M && deg <= RIGHT_DEG {
+                self.first_right_ns.get_or_insert(since_ns);
+            } else {
+                self.accepted_wrong += 1;
             }
         }
     }
@@ -387,6 +416,9 @@ impl Scorer {
                 time_ms: quantiles(&self.align_ms),
                 first_error_m: self.first_accept.map(|(_, m, _)| m),
                 first_error_deg: self.first_accept.map(|(_, _, d)| d),
+                first_right_after_s: self.first_right_ns.map(|ns| ns as f64 * 1e-9),
+                accepted_wrong: self.accepted_wrong,
+                map_sight: self.map_sight_report(),
             },
             rig_pose_error: PoseErrorReport {
                 translation_m: quantiles(&self.err_m),
@@ -406,6 +438,24 @@ impl Scorer {
         write(&out.join("frames.csv"), self.frame_rows.join("\n") + "\n")?;
         write_plots(out, &self.err_series, &self.inlier_series, total_ms)?;
         Ok(report)
+    }
+}
+
+impl Scorer {
+    fn map_sight_report(&self) -> MapSightReport {
+        let (seconds_judged, seconds_seeing_map) = self.sight.seconds_seeing();
+        let sees_map_after_s = self.sight.first_seen_s();
+        let right_in_time = sees_map_after_s.map(|s| {
+            let deadline_ns = s * 1_000_000_000 + RIGHT_WITHIN_NS;
+            self.first_right_ns.is_some_and(|ns| ns <= deadline_ns)
+        });
+        MapSightReport {
+            sees_map_after_s: sees_map_after_s.map(|s| s as f64),
+            best_share: self.sight.best_share(),
+            seconds_judged,
+            seconds_seeing_map,
+            right_within_10s: right_in_time,
+        }
     }
 }
 
@@ -486,6 +536,49 @@ mod tests {
             assert!(json.pointer(&format!("/robot_pose_error/{key}")).is_some_and(|v| v.is_f64()), "{key}");
         }
         assert!(json.pointer("/rig_pose_error/translation_m").is_some(), "the rig's key stays");
+    }
+
+    /// A rig scan of a wall 3 m ahead of the LiDAR (x forward), 200 returns at `t_ns`.
+    fn wall_scan(t_ns: u64) -> LioScan {
+        let points = (0..200)
+            .map(|i| starc_pipeline::lio::TimedPoint {
+                x_m: 3.0,
+                y_m: (i % 20) as f32 * 0.1 - 1.0,
+                z_m: (i / 20) as f32 * 0.1,
+                t_ns,
+            })
+            .collect();
+        LioScan { start_ns: t_ns, end_ns: t_ns, clock: starc_pipeline::lio::Clock::Ptp, points }
+    }
+
+    #[test]
+    fn the_rig_is_judged_from_when_it_first_sees_the_map() {
+        // The rig stands at the truth's origin, looking along x; the robot's map gains the
+        // wall it looks at 4 s after the rig started.
+        let mut t = truth();
+        t.gt_fpv = vec![(0, Isometry3::identity()), (60_000_000_000, Isometry3::identity())];
+        let mut score = Scorer::new(t);
+        score.robot_pose(0, &at(&score.truth.gt_robot, 0), None);
+        score.rig_started(1_000_000_000);
+        let wall: Vec<Vector3<f64>> =
+            (0..200).map(|i| Vector3::new(3.0, (i % 20) as f64 * 0.1 - 1.0, (i / 20) as f64 * 0.1)).collect();
+        for s in 1..20u64 {
+            let map = if s >= 5 { wall.clone() } else { vec![Vector3::new(-20.0, 0.0, 0.0)] };
+            score.rig_scan(&wall_scan(s * 1_000_000_000), map.len(), || map.clone());
+        }
+        // A wrong alignment at 6 s (30 cm off), a right one at 12 s: 8 s after it saw the map.
+        let off = Isometry3::translation(0.3, 0.0, 0.0);
+        score.alignment(7_000_000_000, &off, 50.0, true);
+        score.alignment(13_000_000_000, &Isometry3::identity(), 50.0, true);
+        let out = tempfile::tempdir().unwrap();
+        let memory = MemoryReport { peak_rss_mib: None, note: None };
+        let report = score.finish("offline", LatencyReport::default(), &[], memory, 0.0, out.path()).unwrap();
+        let a = &report.alignment;
+        assert_eq!(a.map_sight.sees_map_after_s, Some(4.0));
+        assert_eq!(a.map_sight.right_within_10s, Some(true));
+        assert_eq!(a.accepted_wrong, 1);
+        assert_eq!(a.first_right_after_s, Some(12.0));
+        assert_eq!(a.first_accepted_after_s, Some(6.0));
     }
 
     #[test]

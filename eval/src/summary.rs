@@ -50,6 +50,7 @@ pub fn summary(r: &Report) -> String {
             let _ = writeln!(o, "  alignment: none accepted in {} attempts: nothing was drawn", a.attempts);
         }
     }
+    let _ = writeln!(o, "  {}", map_sight_line(a));
     let e = &r.rig_pose_error;
     let _ = writeln!(
         o,
@@ -87,4 +88,23 @@ pub fn summary(r: &Report) -> String {
         r.memory.peak_rss_mib.unwrap_or(f64::NAN)
     );
     o
+}
+
+/// When the rig first saw the robot's map, and the alignment goal against it.
+fn map_sight_line(a: &crate::AlignmentReport) -> String {
+    let m = &a.map_sight;
+    let wrong = format!("{} accepted more than 10 cm or 1 deg off", a.accepted_wrong);
+    match (m.sees_map_after_s, m.right_within_10s) {
+        (Some(s), Some(ok)) => format!(
+            "map in view: first {s:.0} s after the rig started ({} of {} s); right within 10 s of it: {}; {wrong}",
+            m.seconds_seeing_map,
+            m.seconds_judged,
+            if ok { "yes" } else { "no" }
+        ),
+        _ if m.seconds_judged == 0 => format!("map in view: not measured (a live run); {wrong}"),
+        _ => format!(
+            "map in view: never (at most {:.0} % of a second's returns on it): no alignment could be asked for; {wrong}",
+            m.best_share * 100.0
+        ),
+    }
 }

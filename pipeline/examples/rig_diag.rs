@@ -187,7 +187,7 @@ fn main() {
                 .seeds
                 .iter()
                 .enumerate()
-                .filter(|(_, s)| matches!(s.origin, SeedOrigin::Global { .. }))
+                .filter(|(_, s)| matches!(s.origin, SeedOrigin::Global { .. } | SeedOrigin::Correlative { .. }))
                 .map(|(i, s)| {
                     let (m, d) = pose_error(&s.pose, &truth_frame);
                     format!("#{i} {m:.1}m/{d:.0}deg {:?} {:.3}", s.origin, s.score)

@@ -141,3 +141,10 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
     )?;
     Ok(())
 }
+
+/// The rig's first-alignment search settings: `path`'s (an align.toml), else the rig's defaults.
+pub fn rig_align_config(path: Option<&std::path::Path>) -> anyhow::Result<AlignConfig> {
+    let Some(path) = path else { return Ok(starc_pipeline::mission::RigCoreConfig::default().align) };
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    AlignConfig::from_toml(&text).with_context(|| format!("parsing {}", path.display()))
+}

@@ -7,7 +7,7 @@
 //! seeded at the world origin with no gate, as a responder who enters anywhere would be.
 
 use anyhow::{bail, Context};
-use starc_eval::batch::{flatten, markdown_table, print_summary, summarize, write_plots, Row};
+use starc_eval::batch::{alignment_goal, flatten, markdown_table, print_summary, summarize, write_plots, Row};
 use starc_eval::offline::{self, Offline, Start};
 use starc_hil::gen;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
@@ -72,6 +72,10 @@ pub struct Args {
     /// odometry) in a fraction of the time.
     #[arg(long)]
     no_align: bool,
+    /// The rig's first-alignment search settings (TOML, as config/align.toml; every key
+    /// optional): to measure a setting on the generated buildings.
+    #[arg(long)]
+    align_config: Option<PathBuf>,
 }
 
 /// An inclusive range of seeds.
@@ -160,7 +164,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", path.display()))?;
     let plots = write_plots(&rows, &args.out.join("plots"))?;
     let table = args.out.join("summary.md");
-    std::fs::write(&table, markdown_table(&file.summary)).with_context(|| format!("writing {}", table.display()))?;
+    let goal = alignment_goal(&rows);
+    std::fs::write(&table, markdown_table(&file.summary) + "\n" + &goal + "\n")
+        .with_context(|| format!("writing {}", table.display()))?;
     println!(
         "{} buildings ({} failed) in {:.0} s; wrote {}, summary.md and {plots} plots",
         file.buildings,
@@ -169,6 +175,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         path.display()
     );
     print_summary(&file.summary);
+    if !args.no_align {
+        println!("  {goal}");
+    }
     Ok(())
 }
 
@@ -273,6 +282,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             confirm_first_s: starc_pipeline::mission::CONFIRM_FIRST_S,
             coverage: !args.no_coverage,
             robot: robot_config(args)?,
+            rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
             truth: Some(truth),
             wall_timing: true,
             align: !args.no_align,

@@ -57,6 +57,10 @@ pub struct Args {
     /// Leave the base's wheel odometry (the run's robot_can.log) out of the robot's LIO.
     #[arg(long)]
     pub no_wheels: bool,
+    /// The rig's first-alignment search settings (TOML, as config/align.toml; every key
+    /// optional): to measure a setting on the generated buildings.
+    #[arg(long)]
+    pub align_config: Option<PathBuf>,
     #[command(flatten)]
     pub detector: super::detector_arg::DetectorArgs,
 }
@@ -84,6 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             detect: args.detector.config()?,
             ..RobotCoreConfig::default()
         },
+        rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
         truth: Some(truth),
         wall_timing: true,
         align: true,

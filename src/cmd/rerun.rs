@@ -81,6 +81,7 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
         confirm_first_s: cfg.as_ref().map_or(starc_pipeline::mission::CONFIRM_FIRST_S, |c| c.confirm_first_s),
         coverage: true,
         robot: RobotCoreConfig::default(),
+        rig_align: starc_pipeline::mission::RigCoreConfig::default().align,
         truth: None,
         wall_timing: !args.no_wall_timing,
         align: true,

@@ -144,6 +144,20 @@ pub struct AlignConfig {
     pub global_matches_per_point: usize,
     pub global_pair_samples: usize,
     pub global_inlier_m: f64,
+    /// Correlative stage of the seed search ([`crate::align::correlative`]): the best
+    /// `correlative_seeds` distinct level poses over the whole target, found by branch and bound
+    /// on 2D grids of `correlative_cell_m`, are tried before every other seed (0: off). A window
+    /// point landing where the target's coverage saw through costs `correlative_free_penalty`
+    /// (one on the target's structure scores 1); a pose scoring under
+    /// `correlative_min_score` of the window's points is no seed. An accepted result must
+    /// score `correlative_margin` more than any other place the stage found.
+    pub correlative_seeds: usize,
+    pub correlative_cell_m: f64,
+    pub correlative_free_penalty: f64,
+    pub correlative_min_score: f64,
+    pub correlative_margin: f64,
+    /// Whether the places the stage found are also tried as seeds (first), or only judge.
+    pub correlative_as_seeds: bool,
     /// Free-space check of a result that passed the other tests, when the source comes with its
     /// rays ([`crate::align::Aligner::align_with_rays`]): at most this many rays are walked
     /// through the map (0: off), and the result is rejected when more than
@@ -224,6 +238,12 @@ impl Default for AlignConfig {
             global_matches_per_point: 2,
             global_pair_samples: 20_000,
             global_inlier_m: 0.4,
+            correlative_seeds: 3,
+            correlative_cell_m: 0.15,
+            correlative_free_penalty: 1.0,
+            correlative_min_score: 0.2,
+            correlative_margin: 0.05,
+            correlative_as_seeds: false,
             free_space_rays: 400,
             free_space_max_blocked: 0.1,
             free_space_step_m: 0.1,
@@ -330,6 +350,9 @@ impl AlignConfig {
         }
         if !(0.0..=1.0).contains(&self.overlap_min_ratio) || !(0.0..=1.0).contains(&self.overlap_min_share) {
             return bad("overlap_min_ratio and overlap_min_share must be in [0, 1]");
+        }
+        if self.correlative_seeds > 0 && !(self.correlative_cell_m >= 0.02 && self.correlative_cell_m.is_finite()) {
+            return bad("correlative_cell_m must be at least 0.02 m");
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

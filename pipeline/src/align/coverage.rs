@@ -77,6 +77,11 @@ impl Coverage {
         }
     }
 
+    /// Every voxel crossed, with how many rays crossed it (in no particular order).
+    pub fn voxels(&self) -> impl Iterator<Item = (Key, u16)> + '_ {
+        self.crossed.iter().map(|(k, n)| (*k, *n))
+    }
+
     /// Rays that crossed voxel `key`.
     pub fn crossings_of(&self, key: &Key) -> u16 {
         self.crossed.get(key).copied().unwrap_or(0)

@@ -14,6 +14,7 @@
 
 mod carve;
 mod config;
+pub mod correlative;
 pub mod coverage;
 mod free_space;
 mod geometry;

@@ -2,6 +2,7 @@
 //! seed, acceptance, and the yaw-grid reseeding around the circle.
 
 use super::config::AlignConfig;
+use super::correlative::{CorrelativeParams, Peak, SourceBand, TargetGrid};
 use super::coverage::{Coverage, Overlap};
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
 use super::geometry::{estimate_normals, pose_rows, thin, Vec3, VoxelIndex};
@@ -52,6 +53,8 @@ pub enum SeedOrigin {
     /// Proposed by the global stage's descriptor matches ([`crate::align::global`]), with the
     /// matches that agreed with it.
     Global { votes: usize },
+    /// Found by the correlative stage ([`crate::align::correlative`]), with its rank there.
+    Correlative { rank: usize },
 }
 
 /// A pose a seed starts from, before its coarse refinement.
@@ -213,6 +216,20 @@ pub struct Aligner {
 /// noise.
 const MIN_CONTRADICTED_POINTS: usize = 20;
 
+/// The correlative stage's queue is worked at most this long (nodes), bounding its time on a
+/// map of many equal places.
+const CORRELATIVE_MAX_EXPANSIONS: usize = 200_000;
+/// A correlative peak this close (m, deg) to an attempt is the attempt's own place.
+const CORRELATIVE_SAME_M: f64 = 1.0;
+const CORRELATIVE_SAME_DEG: f64 = 10.0;
+
+/// The correlative stage's result for one window: the grids, the window's band and the places.
+struct CorrelativeSearch {
+    grid: TargetGrid,
+    band: SourceBand,
+    peaks: Vec<Peak>,
+}
+
 /// Only weak directions at least this much translation are settled: a weak turn (about a long
 /// corridor's axis) is left to ICP.
 const SETTLE_MIN_TRANSLATION_SHARE: f64 = 0.9;
@@ -317,10 +334,20 @@ impl Aligner {
         let seed_source = thin(voxel_downsample(src.icp, c.seed_source_voxel_m), c.seed_max_points);
         let mut starts = self.grid_starts(initial, &self.shifts(c.reseed_shift_m, true));
         starts.extend(self.global_starts(src.icp, initial));
+        let search = self.correlative_search(src.icp);
+        let correlative = self.correlative_seeds(search.as_ref(), initial, &seed_source, first_level);
         let mut seeds = self.rank_seeds(&seed_source, starts, first_level);
         let mut seed_ms = t1.ms();
         let mut tried: Vec<Isometry3<f64>> = Vec::new();
-        self.try_seeds(&seeds, src, first_level, &mut tried, &mut attempts);
+        // The correlative stage has searched every place: its seeds go first, unmoved by the
+        // coarse NDT levels (whose large cells slide a seed off a place they blur).
+        if c.correlative_as_seeds {
+            self.try_seeds(&correlative, src, first_level, &mut tried, &mut attempts);
+        }
+        if !attempts.iter().any(|a| a.accepted || a.ambiguous) {
+            self.try_seeds(&seeds, src, first_level, &mut tried, &mut attempts);
+        }
+        seeds.splice(0..0, correlative);
         // Nothing passed from the guess's position: search again at positions around it.
         let settled = attempts.iter().any(|a| a.accepted || a.ambiguous);
         if !settled && c.escalate_shift_m > 0.0 && c.reseed_shift_m == 0.0 {
@@ -337,6 +364,9 @@ impl Aligner {
                 tracing::debug!("escalated seed search found no new basin");
             }
             seeds.extend(more);
+        }
+        if let (Some(search), Some(a)) = (&search, attempts.iter_mut().find(|a| a.accepted)) {
+            self.check_elsewhere(search, a);
         }
         (attempts, seeds, seed_ms)
     }
@@ -593,6 +623,91 @@ impl Aligner {
                 }
             })
             .collect()
+    }
+
+    /// The correlative stage over the whole target (none when it is off, or the target or the
+    /// source has no structure in its band).
+    fn correlative_search(&self, source: &[Vec3]) -> Option<CorrelativeSearch> {
+        let c = &self.config;
+        if c.correlative_seeds == 0 {
+            return None;
+        }
+        let params = CorrelativeParams {
+            cell_m: c.correlative_cell_m,
+            peaks: c.correlative_seeds,
+            free_penalty: c.correlative_free_penalty,
+            min_crossings: c.overlap_min_crossings,
+            max_source_points: c.seed_max_points,
+            min_score: c.correlative_min_score,
+            max_expansions: CORRELATIVE_MAX_EXPANSIONS,
+        };
+        let grid = TargetGrid::new(&self.icp_target.index.points, self.coverage.as_deref(), &params)?;
+        let band = grid.source_band(source, &params)?;
+        let peaks = grid.search_band(&band, &params);
+        tracing::debug!(scores = ?peaks.iter().map(|p| p.score).collect::<Vec<_>>(), "correlative peaks");
+        Some(CorrelativeSearch { grid, band, peaks })
+    }
+
+    /// The correlative stage's places, best first, as seeds scored (not refined) on the last
+    /// seed level.
+    fn correlative_seeds(
+        &self,
+        search: Option<&CorrelativeSearch>,
+        initial: &Isometry3<f64>,
+        seed_source: &[Vec3],
+        first_level: usize,
+    ) -> Vec<Seed> {
+        let Some(search) = search else { return Vec::new() };
+        let levels = (first_level + self.config.seed_levels).min(self.grids.len());
+        let n = seed_source.len().max(1) as f64;
+        search
+            .peaks
+            .iter()
+            .enumerate()
+            .map(|(rank, peak)| {
+                let (score, matched) =
+                    self.grids.get(levels.saturating_sub(1)).map_or((0.0, 0), |g| g.score(seed_source, &peak.pose));
+                let yaw = peak.pose.rotation.euler_angles().2 - initial.rotation.euler_angles().2;
+                let shift = peak.pose.translation.vector - initial.translation.vector;
+                Seed {
+                    origin: SeedOrigin::Correlative { rank },
+                    yaw_offset_deg: yaw.sin().atan2(yaw.cos()).to_degrees(),
+                    shift_m: [shift.x, shift.y],
+                    score: score / n,
+                    matched_ratio: matched as f64 / n,
+                    pose: peak.pose,
+                }
+            })
+            .collect()
+    }
+
+    /// An accepted attempt must be the best place over the whole map by the correlative score,
+    /// ahead of every other place by `correlative_margin`: a symmetric building or two rooms
+    /// alike fit the view equally, and then the first fit found is a coin toss.
+    fn check_elsewhere(&self, search: &CorrelativeSearch, a: &mut Attempt) {
+        let margin = self.config.correlative_margin;
+        let near = |p: &Isometry3<f64>| {
+            let (m, deg) = super::geometry::pose_error(p, &a.pose);
+            m < CORRELATIVE_SAME_M && deg < CORRELATIVE_SAME_DEG
+        };
+        let here = search
+            .peaks
+            .iter()
+            .filter(|p| near(&p.pose))
+            .map(|p| p.score)
+            .fold(search.grid.score(&search.band, &a.pose), f64::max);
+        let best_other = search.peaks.iter().filter(|p| !near(&p.pose)).max_by(|x, y| x.score.total_cmp(&y.score));
+        if let Some(other) = best_other.filter(|o| o.score > here - margin) {
+            let (off_m, off_deg) = super::geometry::pose_error(&other.pose, &a.pose);
+            a.accepted = false;
+            a.rejected_because.push(Rejection::ElsewhereAsGood {
+                off_m,
+                off_deg,
+                score: other.score,
+                here_score: here,
+                margin,
+            });
+        }
     }
 
     /// The seeds refined on the coarse levels, best score first.

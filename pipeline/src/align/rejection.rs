@@ -42,6 +42,9 @@ pub enum Rejection {
         inliers: f64,
         here_inliers: f64,
     },
+    /// Searched over the whole map (the correlative stage), another place explains the view
+    /// about as well: `score` there against `here_score` here (shares of the view's points).
+    ElsewhereAsGood { off_m: f64, off_deg: f64, score: f64, here_score: f64, margin: f64 },
     /// Too many of the window's rays cross a mapped surface before their end.
     SeesThroughMap { blocked: usize, rays: usize, max_ratio: f64 },
 }
@@ -82,6 +85,10 @@ impl fmt::Display for Rejection {
             Self::Ambiguous { seed_yaw_deg, moved_m, moved_deg, rms_m, here_rms_m, inliers, here_inliers } => write!(
                 f,
                 "ambiguous: seed yaw {seed_yaw_deg:+.0} deg settles {moved_m:.2} m / {moved_deg:.1} deg away with a fit as good (rms {rms_m:.4} vs {here_rms_m:.4} m, inliers {inliers:.3} vs {here_inliers:.3})"
+            ),
+            Self::ElsewhereAsGood { off_m, off_deg, score, here_score, margin } => write!(
+                f,
+                "another place {off_m:.1} m / {off_deg:.0} deg away explains the view as well over the whole map (score {score:.3} vs {here_score:.3} here, margin {margin})"
             ),
             Self::SeesThroughMap { blocked, rays, max_ratio } => write!(
                 f,

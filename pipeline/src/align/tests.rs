@@ -213,9 +213,15 @@ fn symmetric_room_is_ambiguous_not_accepted() {
     assert!(report.attempts.iter().any(|a| a.ambiguous), "{:?}", report.failure);
     let because = report.failure.as_ref().map_or(&[][..], |f| f.because());
     assert!(because.iter().any(|r| matches!(r, Rejection::Ambiguous { .. })), "{:?}", report.failure);
-    // With the check off the same search accepts one of the two: a coin toss.
-    let off = Aligner::new(&target, AlignConfig { ambiguity_seeds: 0, ..AlignConfig::default() }).unwrap();
-    assert!(off.align(&source, &Isometry3::identity()).accepted);
+    // The correlative stage's test alone refuses it too: the turned place scores the same.
+    let correlative = Aligner::new(&target, AlignConfig { ambiguity_seeds: 0, ..AlignConfig::default() }).unwrap();
+    let report = correlative.align(&source, &Isometry3::identity());
+    assert!(!report.accepted);
+    let because = report.failure.as_ref().map_or(&[][..], |f| f.because());
+    assert!(because.iter().any(|r| matches!(r, Rejection::ElsewhereAsGood { .. })), "{:?}", report.failure);
+    // With both off the same search accepts one of the two: a coin toss.
+    let off = AlignConfig { ambiguity_seeds: 0, correlative_seeds: 0, ..AlignConfig::default() };
+    assert!(Aligner::new(&target, off).unwrap().align(&source, &Isometry3::identity()).accepted);
 }
 
 #[test]

@@ -91,3 +91,52 @@ fn points_where_the_robot_saw_through_refuse_a_fit() {
     assert!(!judged.accepted);
     assert!(a.rejected_because.iter().any(|r| matches!(r, Rejection::Contradicted { .. })), "{:?}", a.rejected_because);
 }
+
+/// Two closed rooms alike, 6 x 5 m with a cupboard, 10 m apart: a view of either fits both.
+fn twin_rooms() -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    for x0 in [0.0, 10.0] {
+        let mut segment = |a: (f64, f64), b: (f64, f64)| {
+            let n = ((b.0 - a.0).hypot(b.1 - a.1) / 0.05) as usize;
+            for i in 0..=n {
+                let f = i as f64 / n.max(1) as f64;
+                for k in 0..=50 {
+                    pts.push(Vec3::new(x0 + a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1), f64::from(k) * 0.05));
+                }
+            }
+        };
+        segment((0.0, 0.0), (6.0, 0.0));
+        segment((6.0, 0.0), (6.0, 5.0));
+        segment((6.0, 5.0), (0.0, 5.0));
+        segment((0.0, 5.0), (0.0, 0.0));
+        segment((1.0, 3.5), (2.5, 3.5));
+        segment((2.5, 3.5), (2.5, 4.2));
+        for i in 0..=60 {
+            for j in 0..=50 {
+                pts.push(Vec3::new(x0 + f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
+            }
+        }
+    }
+    pts
+}
+
+#[test]
+fn a_view_that_fits_two_places_on_the_map_is_refused() {
+    let map = twin_rooms();
+    let truth = pose_xyz_yaw(3.5, 2.0, 1.4, 40.0);
+    let source: Vec<Vec3> =
+        map.iter().filter(|p| p.x < 7.0).map(|p| truth.inverse_transform_point(&Point3::from(*p)).coords).collect();
+    // The ambiguity check of seeds is off, so the correlative stage's test alone is judged.
+    let searched = AlignConfig { ambiguity_seeds: 0, ..AlignConfig::default() };
+    let report = Aligner::new(&map, searched.clone()).unwrap().align(&source, &Isometry3::identity());
+    assert!(!report.accepted);
+    let why: Vec<&Rejection> = report.attempts.iter().flat_map(|a| &a.rejected_because).collect();
+    assert!(
+        why.iter().any(|r| matches!(r, Rejection::ElsewhereAsGood { off_m, .. } if (*off_m - 10.0).abs() < 0.5)),
+        "{why:?}"
+    );
+    // Without the stage the first fit found is taken: one of the two rooms.
+    let blind = AlignConfig { correlative_seeds: 0, ..searched };
+    let report = Aligner::new(&map, blind).unwrap().align(&source, &Isometry3::identity());
+    assert!(report.accepted, "{:?}", report.best().map(|a| &a.rejected_because));
+}

@@ -106,6 +106,12 @@ impl OfflineMission {
         &self.robot
     }
 
+    /// The robot's core, for a scorer's look at its map (flushing the map changes nothing the
+    /// mission computes: scans are added in the same order whenever it happens).
+    pub fn robot_mut(&mut self) -> &mut RobotCore {
+        &mut self.robot
+    }
+
     pub fn rig(&self) -> &RigSide {
         &self.rig
     }
