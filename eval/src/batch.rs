@@ -168,8 +168,9 @@ pub fn markdown_table(summary: &Value) -> String {
 /// map, how many were placed right within 10 s of it, and how many accepted a wrong alignment.
 /// Sessions that never saw the map are counted apart (no registration could place them).
 pub fn alignment_goal(rows: &[Row]) -> String {
-    let scored: Vec<&Row> =
-        rows.iter().filter(|r| r.figures.contains_key("alignment.map_sight.seconds_judged")).collect();
+    // Rows that judged no second (alignment off, a rig that never started) say nothing.
+    let judged = |r: &&Row| r.figures.get("alignment.map_sight.seconds_judged").is_some_and(|n| *n > 0.0);
+    let scored: Vec<&Row> = rows.iter().filter(judged).collect();
     let saw: Vec<&&Row> =
         scored.iter().filter(|r| r.figures.contains_key("alignment.map_sight.sees_map_after_s")).collect();
     let in_time = saw.iter().filter(|r| r.figures.get("alignment.map_sight.right_within_10s") == Some(&1.0)).count();

@@ -146,7 +146,8 @@ pub struct AlignConfig {
     pub global_inlier_m: f64,
     /// Correlative stage of the seed search ([`crate::align::correlative`]): the best
     /// `correlative_seeds` distinct level poses over the whole target, found by branch and bound
-    /// on 2D grids of `correlative_cell_m`, are tried before every other seed (0: off). A window
+    /// on 2D grids of `correlative_cell_m` (0: off), judge an accepted result and, with
+    /// `correlative_as_seeds`, are tried before every other seed. A window
     /// point landing where the target's coverage saw through costs `correlative_free_penalty`
     /// (one on the target's structure scores 1); a pose scoring under
     /// `correlative_min_score` of the window's points is no seed. An accepted result must
@@ -351,8 +352,14 @@ impl AlignConfig {
         if !(0.0..=1.0).contains(&self.overlap_min_ratio) || !(0.0..=1.0).contains(&self.overlap_min_share) {
             return bad("overlap_min_ratio and overlap_min_share must be in [0, 1]");
         }
-        if self.correlative_seeds > 0 && !(self.correlative_cell_m >= 0.02 && self.correlative_cell_m.is_finite()) {
-            return bad("correlative_cell_m must be at least 0.02 m");
+        if self.correlative_seeds > 0 && !(self.correlative_cell_m >= 0.05 && self.correlative_cell_m.is_finite()) {
+            return bad("correlative_cell_m must be at least 0.05 m");
+        }
+        let non_negative = [self.correlative_free_penalty, self.correlative_min_score, self.correlative_margin];
+        if !non_negative.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            return bad(
+                "correlative_free_penalty, correlative_min_score and correlative_margin must be finite and at least 0",
+            );
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {
             return bad("seed_max_points and max_full_attempts must be at least 1");

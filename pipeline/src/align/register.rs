@@ -334,7 +334,8 @@ impl Aligner {
         let seed_source = thin(voxel_downsample(src.icp, c.seed_source_voxel_m), c.seed_max_points);
         let mut starts = self.grid_starts(initial, &self.shifts(c.reseed_shift_m, true));
         starts.extend(self.global_starts(src.icp, initial));
-        let search = self.correlative_search(src.icp);
+        // Only judging, the correlative stage runs once an attempt has been accepted.
+        let mut search = if c.correlative_as_seeds { self.correlative_search(src.icp) } else { None };
         let correlative = self.correlative_seeds(search.as_ref(), initial, &seed_source, first_level);
         let mut seeds = self.rank_seeds(&seed_source, starts, first_level);
         let mut seed_ms = t1.ms();
@@ -365,8 +366,13 @@ impl Aligner {
             }
             seeds.extend(more);
         }
-        if let (Some(search), Some(a)) = (&search, attempts.iter_mut().find(|a| a.accepted)) {
-            self.check_elsewhere(search, a);
+        if let Some(a) = attempts.iter_mut().find(|a| a.accepted) {
+            if search.is_none() {
+                search = self.correlative_search(src.icp);
+            }
+            if let Some(search) = &search {
+                self.check_elsewhere(search, a);
+            }
         }
         (attempts, seeds, seed_ms)
     }

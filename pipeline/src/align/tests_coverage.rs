@@ -6,22 +6,22 @@ use super::*;
 use nalgebra::{Isometry3, Point3};
 use std::sync::Arc;
 
+/// A wall from `a` to `b` (x, y), 2.5 m high, points 5 cm apart, those with x at most `x_max`.
+fn push_wall(pts: &mut Vec<Vec3>, a: (f64, f64), b: (f64, f64), x_max: f64) {
+    let n = ((b.0 - a.0).hypot(b.1 - a.1) / 0.05) as usize;
+    for i in 0..=n {
+        let f = i as f64 / n.max(1) as f64;
+        let (x, y) = (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1));
+        if x <= x_max + 1e-9 {
+            pts.extend((0..=50).map(|k| Vec3::new(x, y, f64::from(k) * 0.05)));
+        }
+    }
+}
+
 /// Walls of a 20 x 6 m hall split by a wall at x = 5 with a 1.2 m door; 2.5 m high.
 fn walls(x_max: f64) -> Vec<Vec3> {
     let mut pts = Vec::new();
-    let mut segment = |a: (f64, f64), b: (f64, f64)| {
-        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
-        let n = (len / 0.05) as usize;
-        for i in 0..=n {
-            let f = i as f64 / n.max(1) as f64;
-            let (x, y) = (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1));
-            if x <= x_max + 1e-9 {
-                for k in 0..=50 {
-                    pts.push(Vec3::new(x, y, f64::from(k) * 0.05));
-                }
-            }
-        }
-    };
+    let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, a, b, x_max);
     segment((0.0, 0.0), (20.0, 0.0));
     segment((20.0, 0.0), (20.0, 6.0));
     segment((20.0, 6.0), (0.0, 6.0));
@@ -96,15 +96,8 @@ fn points_where_the_robot_saw_through_refuse_a_fit() {
 fn twin_rooms() -> Vec<Vec3> {
     let mut pts = Vec::new();
     for x0 in [0.0, 10.0] {
-        let mut segment = |a: (f64, f64), b: (f64, f64)| {
-            let n = ((b.0 - a.0).hypot(b.1 - a.1) / 0.05) as usize;
-            for i in 0..=n {
-                let f = i as f64 / n.max(1) as f64;
-                for k in 0..=50 {
-                    pts.push(Vec3::new(x0 + a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1), f64::from(k) * 0.05));
-                }
-            }
-        };
+        let mut segment =
+            |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, (x0 + a.0, a.1), (x0 + b.0, b.1), f64::MAX);
         segment((0.0, 0.0), (6.0, 0.0));
         segment((6.0, 0.0), (6.0, 5.0));
         segment((6.0, 5.0), (0.0, 5.0));
