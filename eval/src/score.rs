@@ -439,9 +439,7 @@ impl Scorer {
         write_plots(out, &self.err_series, &self.inlier_series, total_ms)?;
         Ok(report)
     }
-}
 
-impl Scorer {
     fn map_sight_report(&self) -> MapSightReport {
         let (seconds_judged, seconds_seeing_map) = self.sight.seconds_seeing();
         let sees_map_after_s = self.sight.first_seen_s();

@@ -335,7 +335,7 @@ impl Aligner {
         let mut starts = self.grid_starts(initial, &self.shifts(c.reseed_shift_m, true));
         starts.extend(self.global_starts(src.icp, initial));
         // Only judging, the correlative stage runs once an attempt has been accepted.
-        let mut search = if c.correlative_as_seeds { self.correlative_search(src.icp) } else { None };
+        let search = if c.correlative_as_seeds { self.correlative_search(src.icp) } else { None };
         let correlative = self.correlative_seeds(search.as_ref(), initial, &seed_source, first_level);
         let mut seeds = self.rank_seeds(&seed_source, starts, first_level);
         let mut seed_ms = t1.ms();
@@ -367,11 +367,8 @@ impl Aligner {
             seeds.extend(more);
         }
         if let Some(a) = attempts.iter_mut().find(|a| a.accepted) {
-            if search.is_none() {
-                search = self.correlative_search(src.icp);
-            }
-            if let Some(search) = &search {
-                self.check_elsewhere(search, a);
+            if let Some(search) = search.or_else(|| self.correlative_search(src.icp)) {
+                self.check_elsewhere(&search, a);
             }
         }
         (attempts, seeds, seed_ms)
