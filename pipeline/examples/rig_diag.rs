@@ -52,6 +52,8 @@ fn main() {
         align,
         start_gate_m: gate_m,
         max_first_window_ns: (max_window_s * 1e9) as u64,
+        first_history_ns: std::env::var("HISTORY_S")
+            .map_or(RigCoreConfig::default().first_history_ns, |v| (v.parse::<f64>().unwrap() * 1e9) as u64),
         ..RigCoreConfig::default()
     })
     .unwrap();
@@ -226,6 +228,7 @@ fn main() {
                     w_t_o.translation.y,
                     w_t_o.rotation.euler_angles().2.to_degrees()
                 );
+                core.remember(&o);
                 let _ =
                     core.apply(Err(starc_pipeline::PipelineError::BadFile { format: "diag", reason: String::new() }));
                 continue;

@@ -36,6 +36,11 @@ pub struct ImuSection {
     /// Largest gyro and accelerometer spread (standard deviation) a still window may show.
     pub init_max_gyro_std_rad_s: f64,
     pub init_max_acc_std_m_s2: f64,
+    /// A scan too sparse to match while the IMU has been still this long (the same spreads as
+    /// the still start) holds the velocity at zero, within `still_sigma_m_s` (0: never;
+    /// `lio::still`).
+    pub still_window_s: f64,
+    pub still_sigma_m_s: f64,
     /// Continuous-time noise densities (per sqrt(s)).
     pub gyro_noise_rad_s: f64,
     pub acc_noise_m_s2: f64,
@@ -52,6 +57,8 @@ impl Default for ImuSection {
             init_window_s: 1.0,
             init_max_gyro_std_rad_s: DEFAULT_MAX_GYRO_STD_RAD_S,
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
+            still_window_s: 0.5,
+            still_sigma_m_s: 0.05,
             gyro_noise_rad_s: noise.gyro_rad_s,
             acc_noise_m_s2: noise.acc_m_s2,
             gyro_bias_walk: noise.gyro_bias_walk,
@@ -242,6 +249,7 @@ impl LioFile {
             ("update.max_neighbour_dist_m", self.update.max_neighbour_dist_m),
             ("map.voxel_m", self.map.voxel_m),
             ("map.radius_m", self.map.radius_m),
+            ("imu.still_window_s", self.imu.still_window_s),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -258,6 +266,9 @@ impl LioFile {
                 .into()));
         }
         self.health.validate().map_err(bad)?;
+        if !(self.imu.still_sigma_m_s.is_finite() && self.imu.still_sigma_m_s >= 0.0) {
+            return Err(bad(format!("imu.still_sigma_m_s must be a number >= 0, not {}", self.imu.still_sigma_m_s)));
+        }
         let [r, p, y] = self.extrinsics.rotation_rpy_deg.map(f64::to_radians);
         let noise = ImuNoise {
             gyro_rad_s: self.imu.gyro_noise_rad_s,
@@ -272,6 +283,8 @@ impl LioFile {
             init_window_ns: (self.imu.init_window_s * 1e9) as u64,
             init_max_gyro_std_rad_s: self.imu.init_max_gyro_std_rad_s,
             init_max_acc_std_m_s2: self.imu.init_max_acc_std_m_s2,
+            still_window_ns: (self.imu.still_window_s * 1e9) as u64,
+            still_sigma_m_s: self.imu.still_sigma_m_s,
             noise,
             update: UpdateConfig {
                 max_iterations: self.update.max_iterations,

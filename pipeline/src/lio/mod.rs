@@ -17,6 +17,7 @@ mod plane;
 mod propagate;
 mod so3;
 mod state;
+mod still;
 mod types;
 mod update;
 mod wheel;

@@ -6,6 +6,7 @@ use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, 
 use super::ivox::VoxelMap;
 use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
+use super::still::{zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
@@ -23,6 +24,10 @@ pub struct LioConfig {
     pub init_window_ns: u64,
     pub init_max_gyro_std_rad_s: f64,
     pub init_max_acc_std_m_s2: f64,
+    /// Zero velocity where a scan cannot be matched and the IMU has been still over the last
+    /// `still_window_ns` (`still_sigma_m_s` 0: never; see [`super::still`]).
+    pub still_window_ns: u64,
+    pub still_sigma_m_s: f64,
     pub noise: ImuNoise,
     pub update: UpdateConfig,
     /// Scan downsampling (voxel centroid) before the update.
@@ -51,6 +56,8 @@ impl Default for LioConfig {
             init_window_ns: 1_000_000_000,
             init_max_gyro_std_rad_s: DEFAULT_MAX_GYRO_STD_RAD_S,
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
+            still_window_ns: 500_000_000,
+            still_sigma_m_s: 0.05,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
@@ -105,6 +112,10 @@ pub struct Lio {
     /// The measurement held since `state_ns`.
     held: Option<ImuSample>,
     imu: VecDeque<ImuSample>,
+    /// The IMU samples propagated over the last `still_window_ns`.
+    still: StillWindow,
+    /// Scans whose velocity was held at zero (see [`super::still`]).
+    zero_velocity_updates: u64,
     /// The newest IMU stamp seen, and the IMU's sample period (a running mean).
     last_imu_ns: u64,
     imu_period_ns: f64,
@@ -148,6 +159,8 @@ impl Lio {
             state_ns: 0,
             held: None,
             imu: VecDeque::new(),
+            still: StillWindow::new(cfg.still_window_ns, cfg.init_max_gyro_std_rad_s, cfg.init_max_acc_std_m_s2),
+            zero_velocity_updates: 0,
             last_imu_ns: 0,
             imu_period_ns: 0.0,
             scans: VecDeque::new(),
@@ -324,6 +337,7 @@ impl Lio {
             }
             self.advance(s.t_ns);
             self.held = Some(s);
+            self.still.push(&s);
             self.imu.pop_front();
         }
         self.advance(t_ns);
@@ -382,6 +396,10 @@ impl Lio {
             verdict = Some(v);
         }
         let refused = verdict.and_then(|v| v.refused);
+        // Where the wheels measured the velocity, they know better than the IMU's stillness.
+        if refused == Some(Refusal::TooFewMatches) && wheel != WheelUse::Applied {
+            self.hold_if_still(scan.end_ns);
+        }
         // A map too thin to match (the first scans, or a lost filter's) grows from the IMU's
         // pose; otherwise the filter would never have anything to find itself in.
         let grow_anyway =
@@ -444,6 +462,20 @@ impl Lio {
                 self.cov[(i, i)] = self.cov[(i, i)].max(var);
             }
         }
+    }
+
+    /// A scan that could not be matched: where the IMU has been still, the velocity is held at
+    /// zero rather than integrated on from the IMU's noise.
+    fn hold_if_still(&mut self, end_ns: u64) {
+        let sigma = self.cfg.still_sigma_m_s;
+        if sigma > 0.0 && self.still.is_still(end_ns) && zero_velocity_update(&mut self.state, &mut self.cov, sigma) {
+            self.zero_velocity_updates += 1;
+        }
+    }
+
+    /// Scans whose velocity was held at zero while still, so far.
+    pub fn zero_velocity_updates(&self) -> u64 {
+        self.zero_velocity_updates
     }
 
     /// Refused scans and times lost so far.
@@ -516,6 +548,59 @@ mod tests {
         assert_eq!(lio.non_finite_counts(), (2, 1));
         assert!(matches!(lio.status(), LioStatus::Initializing(_)));
         assert!(lio.state().is_finite());
+    }
+
+    #[test]
+    fn a_still_device_with_nothing_to_match_holds_its_position() {
+        use super::super::types::TimedPoint;
+        // Where it ends after 3 s of empty scans (a wall inside the blind zone), standing still,
+        // with a velocity of 0.2 m/s left in the state by the IMU's noise.
+        let run = |still_sigma_m_s: f64, speed_m_s: f64| {
+            let mut lio = Lio::new(LioConfig { still_sigma_m_s, ..LioConfig::default() });
+            let mut out = Vec::new();
+            let mut t_ns = 0u64;
+            let mut imu_until = |lio: &mut Lio, end_ns: u64, out: &mut Vec<ScanOutput>| {
+                while t_ns <= end_ns {
+                    let s = ImuSample {
+                        t_ns,
+                        clock: Clock::Ptp,
+                        gyro_rad_s: Vector3::zeros(),
+                        acc_m_s2: Vector3::new(0.0, 0.0, 9.81),
+                    };
+                    lio.push_imu(s, out);
+                    t_ns += 5_000_000;
+                }
+            };
+            imu_until(&mut lio, 2_000_000_000, &mut out);
+            // A wall 3 m ahead starts the map.
+            let wall = (0..40)
+                .flat_map(|i| (0..20).map(move |k| (i, k)))
+                .map(|(i, k)| TimedPoint {
+                    x_m: 3.0,
+                    y_m: -2.0 + 0.1 * i as f32,
+                    z_m: -1.0 + 0.1 * k as f32,
+                    t_ns: 2_050_000_000,
+                })
+                .collect();
+            let scan = LioScan { start_ns: 2_000_000_000, end_ns: 2_100_000_000, clock: Clock::Ptp, points: wall };
+            lio.push_scan(scan, &mut out);
+            imu_until(&mut lio, 2_100_000_000, &mut out);
+            lio.state.vel = Vector3::new(speed_m_s, 0.0, 0.0);
+            let from = lio.state().pos;
+            for k in 1..=30u64 {
+                let start_ns = 2_000_000_000 + k * 100_000_000;
+                let empty = LioScan { start_ns, end_ns: start_ns + 100_000_000, clock: Clock::Ptp, points: Vec::new() };
+                lio.push_scan(empty, &mut out);
+                imu_until(&mut lio, start_ns + 100_000_000, &mut out);
+            }
+            ((lio.state().pos - from).norm(), lio.zero_velocity_updates())
+        };
+        let (held_m, updates) = run(0.05, 0.2);
+        assert!(held_m < 0.15, "held within {held_m:.3} m");
+        assert_eq!(updates, 30, "every empty scan");
+        let (ran_m, updates) = run(0.0, 0.2);
+        assert!(ran_m > 0.55, "without it, the velocity carries on: {ran_m:.3} m");
+        assert_eq!(updates, 0);
     }
 
     #[test]

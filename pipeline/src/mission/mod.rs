@@ -15,6 +15,7 @@ mod overlay;
 mod person_motion;
 mod place;
 mod rig;
+mod rig_history;
 mod rig_side;
 mod robot;
 mod robot_map;

@@ -7,6 +7,7 @@
 //! [`RigCore::apply`].
 
 use super::place::{ScanPlacer, ScanPoses};
+use super::rig_history::{with_history, RigHistory};
 use super::waiting::Waiting;
 use crate::align::{
     filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
@@ -37,6 +38,13 @@ pub struct RigCoreConfig {
     /// Until the first alignment, each retry uses all of the rig's scans so far, up to this long:
     /// a longer window sees more of the building and aliases less.
     pub max_first_window_ns: u64,
+    /// Until the first alignment, each retry also takes what the earlier searches' windows held
+    /// (reduced, moving points left out), up to this long before it: the rooms the responder
+    /// walked through can tell a symmetric building's mirror from the truth where the last
+    /// `max_first_window_ns` alone cannot. 0 (none) by default: 30 s placed one development
+    /// building sooner but changed no test-set count, and kept the lab's rerun from aligning
+    /// (docs/align.md).
+    pub first_history_ns: u64,
     pub track_window_ns: u64,
     pub retry_ns: u64,
     pub reregister_ns: u64,
@@ -86,6 +94,7 @@ impl Default for RigCoreConfig {
             world: WorldPoseConfig::default(),
             first_window_ns: 3_000_000_000,
             max_first_window_ns: 10_000_000_000,
+            first_history_ns: 0,
             track_window_ns: 3_000_000_000,
             retry_ns: 1_000_000_000,
             reregister_ns: 5_000_000_000,
@@ -130,6 +139,8 @@ pub struct AlignJob {
     /// People to leave out, in the rig's odometry frame.
     people: Vec<ExclusionBox>,
     scans: Vec<Arc<LioScan>>,
+    /// The earlier searches' windows, in the rig's odometry frame (empty once aligned).
+    history: Arc<Vec<Vector3<f64>>>,
     odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
     coverage: Option<Arc<Coverage>>,
@@ -152,6 +163,8 @@ pub struct AlignInputs {
 /// A job's window, ready to register.
 struct PreparedWindow {
     source: Vec<Vector3<f64>>,
+    /// The window's own points (without the history), in the rig's odometry frame.
+    fresh_odom: Vec<Vector3<f64>>,
     rays: Vec<Ray>,
     /// The window's frame in the rig's odometry.
     frame: Isometry3<f64>,
@@ -172,6 +185,9 @@ pub struct AlignOutcome {
     pub frame_t_lidar: Isometry3<f64>,
     /// The rig's odometry pose at `end_ns` (what the window was built with).
     pub odom_t_lidar: Isometry3<f64>,
+    /// The window's own points (its history left out), in the rig's odometry frame: the history
+    /// of the searches after it.
+    pub window_odom: Vec<Vector3<f64>>,
 }
 
 impl AlignJob {
@@ -192,8 +208,10 @@ impl AlignJob {
         // ceiling alone biases the fit along them: see docs/align.md).
         let (placed, rays, frame) = window(&self.scans, &self.odom, self.end_ns, self.window_ns);
         let inv = frame.inverse();
-        let (source, kept) = filter_window(&placed, &rays, &inv, &self.people, &self.window);
+        let (fresh, kept) = filter_window(&placed, &rays, &inv, &self.people, &self.window);
         drop(placed);
+        let fresh_odom = fresh.iter().map(|p| (frame * Point3::from(*p)).coords).collect();
+        let source = with_history(fresh, &self.history, &inv, self.window.voxel_m);
         let rays: Vec<Ray> = rays
             .iter()
             .map(|(_, r)| Ray {
@@ -201,7 +219,7 @@ impl AlignJob {
                 end: (inv * Point3::from(r.end)).coords,
             })
             .collect();
-        PreparedWindow { source, rays, frame, kept }
+        PreparedWindow { source, fresh_odom, rays, frame, kept }
     }
 
     /// The registration's inputs, for peers and diagnosis.
@@ -215,7 +233,7 @@ impl AlignJob {
     }
 
     pub fn run(self) -> Result<AlignOutcome, PipelineError> {
-        let PreparedWindow { source, rays, frame, kept } = self.source();
+        let PreparedWindow { source, fresh_odom, rays, frame, kept } = self.source();
         tracing::debug!(
             end_ns = self.end_ns,
             points_in = kept.points_in,
@@ -264,6 +282,7 @@ impl AlignJob {
             world_t_lidar,
             frame_t_lidar,
             odom_t_lidar: self.lidar_pose,
+            window_odom: fresh_odom,
         })
     }
 }
@@ -345,6 +364,8 @@ pub struct RigCore {
     waiting_for: Option<Waiting>,
     /// The first alignment waiting for confirmation.
     candidate: Option<Candidate>,
+    /// What the first searches' windows held (see `RigCoreConfig::first_history_ns`).
+    history: RigHistory,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -381,6 +402,7 @@ impl RigCore {
             lost: 0,
             waiting_for: None,
             candidate: None,
+            history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
             cfg,
         })
     }
@@ -538,6 +560,7 @@ impl RigCore {
             window: self.cfg.window.clone(),
             people,
             scans,
+            history: if aligned { Arc::new(Vec::new()) } else { self.history.points() },
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
             coverage: self.coverage.clone(),
@@ -555,6 +578,7 @@ impl RigCore {
             Ok(o) => o,
             Err(e) => return AlignVerdict::Failed { error: e.to_string() },
         };
+        self.remember(&o);
         if !o.report.accepted {
             let failure = o.report.failure.unwrap_or(AlignFailure::NoAttempt);
             return self.refused(o.tracking, failure);
@@ -581,6 +605,14 @@ impl RigCore {
         }
         self.accepted += 1;
         AlignVerdict::Accepted { first }
+    }
+
+    /// Keeps a search's window for the searches after it (what [`Self::apply`] does first; a
+    /// diagnosis that never applies a result calls it itself). Re-registrations are not kept.
+    pub fn remember(&mut self, o: &AlignOutcome) {
+        if !o.tracking {
+            self.history.merge(&o.window_odom, o.end_ns);
+        }
     }
 
     /// A first alignment that passed its tests joins the candidate it agrees with (or starts a

@@ -70,10 +70,13 @@ pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
 pub const ROBOT_IMU_T_BASE_M: [f64; 3] = [0.04165, 0.02326, -0.4784];
 
 impl RobotCoreConfig {
-    /// The robot's LIO settings: the defaults with [`ROBOT_GYRO_NOISE_RAD_S`].
+    /// The robot's LIO settings: the defaults with [`ROBOT_GYRO_NOISE_RAD_S`], and no
+    /// zero-velocity update (`lio::still`): a base gliding at a steady speed looks as still to
+    /// its IMU as one parked, and its wheels tell the two apart.
     pub fn robot_lio() -> LioConfig {
         LioConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
+            still_sigma_m_s: 0.0,
             wheel: WheelFusion { pos_imu_base: ROBOT_IMU_T_BASE_M.into(), ..WheelFusion::default() },
             ..LioConfig::default()
         }
@@ -322,7 +325,16 @@ mod tests {
         let generic = LioConfig::default();
         let robot = RobotCoreConfig::robot_lio();
         assert_eq!(robot.wheel.pos_imu_base, nalgebra::Vector3::from(ROBOT_IMU_T_BASE_M));
-        assert_eq!(LioConfig { noise: generic.noise, wheel: generic.wheel.clone(), ..robot }, generic);
+        assert_eq!(robot.still_sigma_m_s, 0.0);
+        assert_eq!(
+            LioConfig {
+                noise: generic.noise,
+                wheel: generic.wheel.clone(),
+                still_sigma_m_s: generic.still_sigma_m_s,
+                ..robot
+            },
+            generic
+        );
     }
 
     fn point(z_m: f32) -> WindowPoint {

@@ -1,0 +1,136 @@
+//! A device that stands still while its LiDAR sees nothing it can match: a responder facing a
+//! wall inside the Avia's 1 m blind zone, or a robot parked against one. The IMU alone then
+//! integrates its noise and bias twice, and the position runs away by metres within seconds
+//! (development office-6: the rig's LIO 9.4 m off by the end of a 10 s stand, APE max).
+//! Where the IMU says it has been still, the velocity is held at zero instead (a zero-velocity
+//! update, as pedestrian inertial navigation does at each footfall).
+//!
+//! An IMU cannot tell standing still from gliding at a constant velocity, so the update is used
+//! only when the scan cannot correct the state at all (too few matches): nobody walks steadily
+//! on into a wall they are within a metre of, a real walker's steps are no glide, and where a
+//! scan matches it knows better. (Gating it on the filter's own speed as well was tried: a
+//! velocity that had run past the gate was never stopped again, 8.2 m in development flat-5.)
+
+use super::state::{Cov, State, VEL};
+use super::types::ImuSample;
+use nalgebra::{Matrix3, SMatrix, Vector3};
+use std::collections::VecDeque;
+
+/// The IMU's last `window_ns`, and whether it was still over all of it.
+#[derive(Clone, Debug)]
+pub struct StillWindow {
+    window_ns: u64,
+    max_gyro_std_rad_s: f64,
+    max_acc_std_m_s2: f64,
+    samples: VecDeque<ImuSample>,
+}
+
+impl StillWindow {
+    /// Still means spreads (standard deviations) within these limits, the static start's.
+    pub fn new(window_ns: u64, max_gyro_std_rad_s: f64, max_acc_std_m_s2: f64) -> Self {
+        Self { window_ns, max_gyro_std_rad_s, max_acc_std_m_s2, samples: VecDeque::new() }
+    }
+
+    /// Adds one sample (in time order) and forgets those older than the window before it.
+    pub fn push(&mut self, s: &ImuSample) {
+        self.samples.push_back(*s);
+        let from = s.t_ns.saturating_sub(self.window_ns);
+        while self.samples.front().is_some_and(|q| q.t_ns < from) {
+            self.samples.pop_front();
+        }
+    }
+
+    /// Whether the samples span the window up to `t_ns` and their spreads stay within the limits.
+    pub fn is_still(&self, t_ns: u64) -> bool {
+        let (Some(first), Some(last)) = (self.samples.front(), self.samples.back()) else { return false };
+        // Half a window of missing samples at either end is no evidence of anything.
+        let covers = last.t_ns.saturating_sub(first.t_ns) >= self.window_ns / 2
+            && t_ns.saturating_sub(last.t_ns) <= self.window_ns / 2;
+        if !covers || self.samples.len() < 3 {
+            return false;
+        }
+        let n = self.samples.len() as f64;
+        let spread = |f: fn(&ImuSample) -> Vector3<f64>| {
+            let mean = self.samples.iter().map(f).sum::<Vector3<f64>>() / n;
+            (self.samples.iter().map(|s| (f(s) - mean).norm_squared()).sum::<f64>() / n).sqrt()
+        };
+        spread(|s| s.gyro_rad_s) <= self.max_gyro_std_rad_s && spread(|s| s.acc_m_s2) <= self.max_acc_std_m_s2
+    }
+}
+
+/// One Kalman update of `state`/`cov` with a world velocity of zero, `sigma_m_s` on each axis.
+/// Returns false (nothing changed) when the innovation covariance cannot be inverted.
+pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) -> bool {
+    let mut h = SMatrix::<f64, 3, { super::state::DIM }>::zeros();
+    h.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
+    let r = Matrix3::identity() * (sigma_m_s * sigma_m_s);
+    let Some(s_inv) = (h * *cov * h.transpose() + r).try_inverse() else { return false };
+    let gain = *cov * h.transpose() * s_inv;
+    let innovation = -state.vel;
+    *state = state.boxplus(&(gain * innovation));
+    // Joseph form, as the wheels' update.
+    let a = Cov::identity() - gain * h;
+    *cov = a * *cov * a.transpose() + gain * r * gain.transpose();
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    const MS: u64 = 1_000_000;
+
+    fn sample(t_ns: u64, gyro_z: f64, acc_x: f64) -> ImuSample {
+        ImuSample {
+            t_ns,
+            clock: starc_time::Clock::Ptp,
+            gyro_rad_s: Vector3::new(0.0, 0.0, gyro_z),
+            acc_m_s2: Vector3::new(acc_x, 0.0, 9.81),
+        }
+    }
+
+    #[test]
+    fn still_only_over_a_whole_quiet_window() {
+        let mut w = StillWindow::new(500 * MS, 0.06, 0.2);
+        assert!(!w.is_still(0), "nothing seen");
+        for k in 0..100u64 {
+            // Hand sway: 0.03 rad/s and 0.1 m/s^2 either way.
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            w.push(&sample(k * 5 * MS, 0.03 * sign, 0.1 * sign));
+        }
+        assert!(w.is_still(500 * MS));
+        // The IMU went quiet for a second: not known to be still now.
+        assert!(!w.is_still(1500 * MS));
+        // A step (walking): not still until it has left the window.
+        w.push(&sample(505 * MS, 0.0, 3.0));
+        assert!(!w.is_still(505 * MS));
+        for k in 102..300u64 {
+            w.push(&sample(k * 5 * MS, 0.0, 0.0));
+        }
+        assert!(w.is_still(299 * 5 * MS));
+    }
+
+    #[test]
+    fn the_update_stops_a_drifting_velocity_and_leaves_the_rest() {
+        let mut state = State {
+            rot: Rotation3::identity(),
+            pos: Vector3::new(1.0, 2.0, 0.0),
+            vel: Vector3::new(0.8, -0.3, 0.1),
+            bias_gyro: Vector3::zeros(),
+            bias_acc: Vector3::zeros(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            rot_imu_lidar: Rotation3::identity(),
+            pos_imu_lidar: Vector3::zeros(),
+        };
+        // Only the velocity is uncertain (and uncorrelated with the rest).
+        let mut cov = Cov::identity() * 1e-6;
+        for i in VEL..VEL + 3 {
+            cov[(i, i)] = 1.0;
+        }
+        assert!(zero_velocity_update(&mut state, &mut cov, 0.02));
+        assert!(state.vel.norm() < 0.01, "{:?}", state.vel);
+        assert!((state.pos - Vector3::new(1.0, 2.0, 0.0)).norm() < 1e-9);
+        assert!(cov[(VEL, VEL)] < 1e-3);
+    }
+}
