@@ -34,6 +34,21 @@ pub struct State {
 }
 
 impl State {
+    /// Level, at rest at the origin, no biases, standard gravity, the LiDAR on the IMU (tests).
+    #[cfg(test)]
+    pub fn at_rest() -> Self {
+        Self {
+            rot: Rotation3::identity(),
+            pos: Vector3::zeros(),
+            vel: Vector3::zeros(),
+            bias_gyro: Vector3::zeros(),
+            bias_acc: Vector3::zeros(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            rot_imu_lidar: Rotation3::identity(),
+            pos_imu_lidar: Vector3::zeros(),
+        }
+    }
+
     /// Whether every part of the state is a finite number (a NaN that got in would spread
     /// through every later scan and into the map).
     pub fn is_finite(&self) -> bool {

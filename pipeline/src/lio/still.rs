@@ -77,7 +77,6 @@ pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Rotation3;
 
     const MS: u64 = 1_000_000;
 
@@ -113,16 +112,8 @@ mod tests {
 
     #[test]
     fn the_update_stops_a_drifting_velocity_and_leaves_the_rest() {
-        let mut state = State {
-            rot: Rotation3::identity(),
-            pos: Vector3::new(1.0, 2.0, 0.0),
-            vel: Vector3::new(0.8, -0.3, 0.1),
-            bias_gyro: Vector3::zeros(),
-            bias_acc: Vector3::zeros(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
-        };
+        let mut state =
+            State { pos: Vector3::new(1.0, 2.0, 0.0), vel: Vector3::new(0.8, -0.3, 0.1), ..State::at_rest() };
         // Only the velocity is uncertain (and uncorrelated with the rest).
         let mut cov = Cov::identity() * 1e-6;
         for i in VEL..VEL + 3 {
