@@ -84,16 +84,7 @@ mod tests {
 
     #[test]
     fn constant_rotation_and_acceleration_integrate_exactly_enough() {
-        let mut s = State {
-            rot: Rotation3::identity(),
-            pos: Vector3::zeros(),
-            vel: Vector3::zeros(),
-            bias_gyro: Vector3::zeros(),
-            bias_acc: Vector3::zeros(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
-        };
+        let mut s = State::at_rest();
         let mut cov = Cov::identity() * 1e-6;
         // At rest with gravity cancelled by the specific force, 0.5 m/s^2 forward, 0.2 rad/s yaw.
         let imu = ImuSample {

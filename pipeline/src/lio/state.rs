@@ -102,12 +102,7 @@ mod tests {
         let s = State {
             rot: so3::exp(&Vector3::new(0.1, 0.2, -0.3)),
             pos: Vector3::new(1.0, 2.0, 3.0),
-            vel: Vector3::zeros(),
-            bias_gyro: Vector3::zeros(),
-            bias_acc: Vector3::zeros(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
+            ..State::at_rest()
         };
         let dx = ErrVec::from_fn(|i, _| (i as f64 + 1.0) * 0.01);
         assert!((s.boxplus(&dx).boxminus(&s) - dx).norm() < 1e-12);

@@ -278,16 +278,7 @@ mod tests {
     use nalgebra::Rotation3;
 
     fn state_at(pos: Vector3<f64>) -> State {
-        State {
-            rot: Rotation3::identity(),
-            pos,
-            vel: Vector3::zeros(),
-            bias_gyro: Vector3::zeros(),
-            bias_acc: Vector3::zeros(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
-        }
+        State { pos, ..State::at_rest() }
     }
 
     /// A floor alone pins height, roll and pitch; x, y and yaw are left to the IMU.
