@@ -34,6 +34,25 @@ pub struct InitResult {
 pub const DEFAULT_MAX_GYRO_STD_RAD_S: f64 = 0.06;
 pub const DEFAULT_MAX_ACC_STD_M_S2: f64 = 0.2;
 
+/// Means and spreads (standard deviations about the means) of IMU samples.
+pub(super) struct Spread {
+    pub mean_gyro: Vector3<f64>,
+    pub mean_acc: Vector3<f64>,
+    pub gyro_std: f64,
+    pub acc_std: f64,
+}
+
+/// The means and spreads of `samples` (zeros for none).
+pub(super) fn spread<'a>(samples: impl IntoIterator<Item = &'a ImuSample> + Copy) -> Spread {
+    let n = samples.into_iter().count().max(1) as f64;
+    let mean_gyro = samples.into_iter().map(|s| s.gyro_rad_s).sum::<Vector3<f64>>() / n;
+    let mean_acc = samples.into_iter().map(|s| s.acc_m_s2).sum::<Vector3<f64>>() / n;
+    let std = |f: fn(&ImuSample) -> Vector3<f64>, m: &Vector3<f64>| {
+        (samples.into_iter().map(|s| (f(s) - m).norm_squared()).sum::<f64>() / n).sqrt()
+    };
+    Spread { gyro_std: std(|s| s.gyro_rad_s, &mean_gyro), acc_std: std(|s| s.acc_m_s2, &mean_acc), mean_gyro, mean_acc }
+}
+
 /// Gathers the first `window_ns` of IMU data and checks it was static.
 #[derive(Clone, Debug)]
 pub struct StaticInit {
@@ -63,14 +82,7 @@ impl StaticInit {
         if imu.t_ns.saturating_sub(first) < self.window_ns {
             return (self.status(), None);
         }
-        let n = self.samples.len() as f64;
-        let mean_g = self.samples.iter().map(|s| s.gyro_rad_s).sum::<Vector3<f64>>() / n;
-        let mean_a = self.samples.iter().map(|s| s.acc_m_s2).sum::<Vector3<f64>>() / n;
-        let std = |f: &dyn Fn(&ImuSample) -> Vector3<f64>, m: &Vector3<f64>| {
-            (self.samples.iter().map(|s| (f(s) - m).norm_squared()).sum::<f64>() / n).sqrt()
-        };
-        let gyro_std = std(&|s| s.gyro_rad_s, &mean_g);
-        let acc_std = std(&|s| s.acc_m_s2, &mean_a);
+        let Spread { mean_gyro: mean_g, mean_acc: mean_a, gyro_std, acc_std } = spread(&self.samples);
         if gyro_std > self.max_gyro_std_rad_s || acc_std > self.max_acc_std_m_s2 || mean_a.norm() < 1.0 {
             self.restarts += 1;
             self.samples.clear();

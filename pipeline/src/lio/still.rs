@@ -11,9 +11,10 @@
 //! scan matches it knows better. (Gating it on the filter's own speed as well was tried: a
 //! velocity that had run past the gate was never stopped again, 8.2 m in development flat-5.)
 
+use super::init::spread;
 use super::state::{Cov, State, VEL};
 use super::types::ImuSample;
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, SMatrix};
 use std::collections::VecDeque;
 
 /// The IMU's last `window_ns`, and whether it was still over all of it.
@@ -49,12 +50,8 @@ impl StillWindow {
         if !covers || self.samples.len() < 3 {
             return false;
         }
-        let n = self.samples.len() as f64;
-        let spread = |f: fn(&ImuSample) -> Vector3<f64>| {
-            let mean = self.samples.iter().map(f).sum::<Vector3<f64>>() / n;
-            (self.samples.iter().map(|s| (f(s) - mean).norm_squared()).sum::<f64>() / n).sqrt()
-        };
-        spread(|s| s.gyro_rad_s) <= self.max_gyro_std_rad_s && spread(|s| s.acc_m_s2) <= self.max_acc_std_m_s2
+        let s = spread(&self.samples);
+        s.gyro_std <= self.max_gyro_std_rad_s && s.acc_std <= self.max_acc_std_m_s2
     }
 }
 
@@ -77,6 +74,7 @@ pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     const MS: u64 = 1_000_000;
 

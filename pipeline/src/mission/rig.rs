@@ -141,6 +141,8 @@ pub struct AlignJob {
     scans: Vec<Arc<LioScan>>,
     /// The earlier searches' windows, in the rig's odometry frame (empty once aligned).
     history: Arc<Vec<Vector3<f64>>>,
+    /// Whether the window is handed back for the history (a first search with the history on).
+    keep_window: bool,
     odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
     coverage: Option<Arc<Coverage>>,
@@ -163,7 +165,7 @@ pub struct AlignInputs {
 /// A job's window, ready to register.
 struct PreparedWindow {
     source: Vec<Vector3<f64>>,
-    /// The window's own points (without the history), in the rig's odometry frame.
+    /// The window's own points (without the history), in the rig's odometry frame, when kept.
     fresh_odom: Vec<Vector3<f64>>,
     rays: Vec<Ray>,
     /// The window's frame in the rig's odometry.
@@ -186,7 +188,7 @@ pub struct AlignOutcome {
     /// The rig's odometry pose at `end_ns` (what the window was built with).
     pub odom_t_lidar: Isometry3<f64>,
     /// The window's own points (its history left out), in the rig's odometry frame: the history
-    /// of the searches after it.
+    /// of the searches after it (empty unless `RigCoreConfig::first_history_ns` keeps one).
     pub window_odom: Vec<Vector3<f64>>,
 }
 
@@ -210,7 +212,11 @@ impl AlignJob {
         let inv = frame.inverse();
         let (fresh, kept) = filter_window(&placed, &rays, &inv, &self.people, &self.window);
         drop(placed);
-        let fresh_odom = fresh.iter().map(|p| (frame * Point3::from(*p)).coords).collect();
+        let fresh_odom = if self.keep_window {
+            fresh.iter().map(|p| (frame * Point3::from(*p)).coords).collect()
+        } else {
+            Vec::new()
+        };
         let source = with_history(fresh, &self.history, &inv, self.window.voxel_m);
         let rays: Vec<Ray> = rays
             .iter()
@@ -561,6 +567,7 @@ impl RigCore {
             people,
             scans,
             history: if aligned { Arc::new(Vec::new()) } else { self.history.points() },
+            keep_window: !aligned && self.cfg.first_history_ns > 0,
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
             coverage: self.coverage.clone(),
