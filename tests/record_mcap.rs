@@ -179,6 +179,7 @@ fn write_everything(path: &Path, compression: ChunkCompression) -> Vec<Value> {
                 size_m: [0.6, 0.5, 1.8],
                 yaw_rad: 0.4 * j as f64,
                 score: 0.9,
+                pose: starc_pipeline::detect::PersonPose::Upright,
             })
             .collect();
         rec.detections(ptp(ns), &people).unwrap();
@@ -187,7 +188,7 @@ fn write_everything(path: &Path, compression: ChunkCompression) -> Vec<Value> {
             let (s, c) = (p.yaw_rad / 2.0).sin_cos();
             markers.push(json!(["people", p.id, 1, 0, "map", p.center_m, [0.0, 0.0, s, c], p.size_m, ""]));
             let top = [p.center_m[0], p.center_m[1], p.center_m[2] + 0.9 + 0.2];
-            let text = format!("person {} (0.90)", p.id);
+            let text = format!("person {} upright (0.90)", p.id);
             markers.push(json!(["people_labels", p.id, 9, 0, "map", top, [0.0, 0.0, s, c], [0.0, 0.0, 0.25], text]));
         }
         expected.push(json!([Topic::DetectionMarkers.name(), ns, {"markers": markers}]));

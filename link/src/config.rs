@@ -217,12 +217,12 @@ pub(crate) fn json(s: &str) -> String {
     out
 }
 
-fn json_list(items: &[String]) -> String {
+pub(crate) fn json_list(items: &[String]) -> String {
     format!("[{}]", items.iter().map(|s| json(s)).collect::<Vec<_>>().join(","))
 }
 
 /// Whether an endpoint's address (`host:port`, `[v6]:port`) is on this host only.
-fn is_loopback(address: &str) -> bool {
+pub(crate) fn is_loopback(address: &str) -> bool {
     let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
     let host = host.trim_start_matches('[').trim_end_matches(']');
     match host.parse::<std::net::IpAddr>() {

@@ -24,6 +24,9 @@ pub enum LinkError {
     /// A message that does not encode or decode.
     #[error("link message: {0}")]
     Codec(#[from] PipelineError),
+    /// A ROS 2 type whose RIHS01 hash cannot be computed from the schema we ship.
+    #[error("ROS 2 type hash of {type_name}: {reason}")]
+    TypeHash { type_name: String, reason: String },
     /// The node was closed.
     #[error("link node closed")]
     Closed,

@@ -10,6 +10,7 @@ pub mod error;
 pub mod keys;
 pub mod node;
 mod queue;
+pub mod ros2;
 pub mod stats;
 
 pub use config::{LinkConfig, Mode, TlsConfig};

@@ -44,6 +44,9 @@ pub struct RobotNodeConfig {
     #[serde(default)]
     pub record_fsync: bool,
     pub link: LinkConfig,
+    /// The ROS 2 bridge (docs/ros2.md): off unless `enabled`.
+    #[serde(default)]
+    pub ros2: starc_link::ros2::Ros2Config,
 }
 
 fn default_map_period_ms() -> u64 {
@@ -137,6 +140,9 @@ pub struct FpvNodeConfig {
     #[serde(default = "default_record_frames_every")]
     pub record_frames_every: u64,
     pub link: LinkConfig,
+    /// The ROS 2 bridge (docs/ros2.md): off unless `enabled`.
+    #[serde(default)]
+    pub ros2: starc_link::ros2::Ros2Config,
 }
 
 /// The driver's config with the node's own Avia named in it (`accept_ips`), so that a config
@@ -203,6 +209,10 @@ fn check_link(link: &LinkConfig, config: &Path) -> Result<()> {
     link.validate().map_err(|source| NodeError::LinkConfig { path: config.into(), source })
 }
 
+fn check_ros2(ros2: &starc_link::ros2::Ros2Config, config: &Path) -> Result<()> {
+    ros2.validate().map_err(|source| NodeError::LinkConfig { path: config.into(), source })
+}
+
 /// The link's relative paths (zenoh_config, [link.tls] files) taken from the config's folder.
 fn rel_link(config: &Path, link: &mut LinkConfig) {
     if let Some(dir) = config.parent() {
@@ -216,6 +226,7 @@ impl RobotNodeConfig {
         let mut cfg: Self = load(path)?;
         cfg.resolve_paths(path);
         check_link(&cfg.link, path)?;
+        check_ros2(&cfg.ros2, path)?;
         cfg.detect.validate().map_err(|e| NodeError::Config(format!("{}: [detect] {e}", path.display())))?;
         Ok(cfg)
     }
@@ -226,6 +237,7 @@ impl RobotNodeConfig {
         rel(config, &mut self.detect.pillars.model);
         rel(config, &mut self.record);
         rel_link(config, &mut self.link);
+        self.ros2.resolve_paths(config.parent().unwrap_or(Path::new(".")));
         if let Some(w) = self.wheels.as_mut() {
             w.resolve_paths(config);
         }
@@ -262,6 +274,13 @@ impl FpvNodeConfig {
         cfg.resolve_paths(path);
         cfg.validate()?;
         check_link(&cfg.link, path)?;
+        check_ros2(&cfg.ros2, path)?;
+        if cfg.ros2.cmd_vel {
+            return Err(NodeError::Config(format!(
+                "{}: [ros2] cmd_vel drives the robot's base: the rig has none",
+                path.display()
+            )));
+        }
         Ok(cfg)
     }
 
@@ -272,6 +291,7 @@ impl FpvNodeConfig {
         rel(config, &mut self.record);
         rel(config, &mut self.view.png_dir);
         rel_link(config, &mut self.link);
+        self.ros2.resolve_paths(config.parent().unwrap_or(Path::new(".")));
     }
 }
 

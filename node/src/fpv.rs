@@ -7,6 +7,7 @@
 
 use super::config::{driver_for, lio_config, render_config, FpvNodeConfig};
 use super::recording::{NodeRecorder, RecordOptions};
+use super::ros2::{Ros2Out, Ros2Summary};
 use super::{wait_stop, Fed, LidarFeed, Stop};
 use crate::error::{NodeError, Result};
 use nalgebra::Isometry3;
@@ -73,6 +74,8 @@ pub struct FpvSummary {
     pub map_tiles: usize,
     /// What the recording queued and dropped (none: not recording, or it could not finish).
     pub recording: Option<crate::recording::RecordingCounts>,
+    /// What the ROS 2 bridge published and dropped (none: `[ros2]` off).
+    pub ros2: Option<Ros2Summary>,
     /// The Livox driver's devices, sessions and what it refused (spoofed senders, cut scans).
     pub livox: Option<starc_livox::live::DriverStats>,
     pub peak_rss_mib: Option<f64>,
@@ -106,6 +109,7 @@ pub async fn run(
     }
     let record = RecordOptions { fsync: cfg.record_fsync };
     let recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "fpv", record)).transpose()?;
+    let ros2 = Ros2Out::start(&cfg.ros2, "fpv", None)?;
     let hub = ViewHub::new();
     let (views_stop, views_shutdown) = tokio::sync::watch::channel(false);
     let views = start_views(&cfg.view, hub.clone(), views_shutdown).await?;
@@ -117,6 +121,7 @@ pub async fn run(
         feed: LidarFeed::new(cfg.lidar_ip, "rig"),
         side,
         recorder,
+        ros2,
         hub,
         views,
         watch,
@@ -172,6 +177,7 @@ pub async fn run(
             Err(e) => tracing::warn!("recording: {e}"),
         }
     }
+    node.summary.ros2 = node.ros2.take().map(Ros2Out::finish);
     node.summary.livox = Some(driver.stats());
     let _ = driver.stop().await;
     node.summary.map_tiles = node.side.tile_count();
@@ -208,6 +214,7 @@ struct RigNode {
     feed: LidarFeed,
     side: RigSide,
     recorder: Option<NodeRecorder>,
+    ros2: Option<Ros2Out>,
     hub: ViewHub,
     views: RunningViews,
     watch: Option<mpsc::UnboundedSender<FpvEvent>>,
@@ -300,7 +307,7 @@ impl RigNode {
     /// A driver event; whether the frame should be drawn again.
     fn on_lidar(&mut self, ev: LivoxEvent) -> bool {
         let mut outs = Vec::new();
-        match self.feed.take(ev, self.recorder.as_mut()) {
+        match self.feed.take(ev, self.recorder.as_mut(), self.ros2.as_mut()) {
             Some(Fed::Scan { scan, last_host_ns, .. }) => {
                 if let Some(h) = last_host_ns {
                     self.host_minus_lidar_ns = Some(h as i64 - scan.end_ns as i64);
@@ -318,8 +325,13 @@ impl RigNode {
                     self.send(FpvEvent::Started { first_ns });
                 }
             }
-            if let (Some(r), Ok(Some(p))) = (self.recorder.as_mut(), self.side.core().world().world_pose(o.end_ns)) {
-                r.pose(o.end_ns, &p);
+            if let Ok(Some(p)) = self.side.core().world().world_pose(o.end_ns) {
+                if let Some(r) = self.recorder.as_mut() {
+                    r.pose(o.end_ns, &p);
+                }
+                if let Some(b) = self.ros2.as_mut() {
+                    b.pose(o.end_ns, &p);
+                }
             }
         }
         !outs.is_empty()
@@ -357,6 +369,9 @@ impl RigNode {
                 data: png.to_vec(),
             };
             let _ = fox.publish_msg(Topic::ArImage.name(), t_ns, &msg);
+        }
+        if let Some(b) = self.ros2.as_mut() {
+            b.ar_frame(t_ns, snapshot.clone());
         }
         if let Some(r) = self.recorder.as_mut().filter(|_| self.summary.frames.is_multiple_of(self.record_frames_every))
         {

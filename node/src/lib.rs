@@ -12,6 +12,8 @@ pub mod config;
 pub mod fpv;
 pub mod recording;
 pub mod robot;
+pub mod ros2;
+pub mod teleop;
 mod tiles;
 pub mod wheels;
 
@@ -47,7 +49,13 @@ impl LidarFeed {
         Self { ours, name }
     }
 
-    pub fn take(&mut self, ev: LivoxEvent, recorder: Option<&mut NodeRecorder>) -> Option<Fed> {
+    /// `ev` if it is ours, also handed to the recording and the ROS 2 bridge where there are.
+    pub fn take(
+        &mut self,
+        ev: LivoxEvent,
+        recorder: Option<&mut NodeRecorder>,
+        ros2: Option<&mut ros2::Ros2Out>,
+    ) -> Option<Fed> {
         match ev {
             LivoxEvent::Scan { ip, scan } if *self.ours.get_or_insert(ip) == ip => {
                 let fed = Fed::Scan {
@@ -55,6 +63,9 @@ impl LidarFeed {
                     clock: scan.start.clock,
                     last_host_ns: scan.last_host_receive.map(|s| s.ns),
                 };
+                if let Some(b) = ros2 {
+                    b.scan(&scan);
+                }
                 if let Some(r) = recorder {
                     r.scan(scan);
                 }
@@ -64,6 +75,9 @@ impl LidarFeed {
                 let s = reading_imu(&r);
                 if let Some(rec) = recorder {
                     rec.imu(&s);
+                }
+                if let Some(b) = ros2 {
+                    b.imu(&s);
                 }
                 Some(Fed::Imu(s))
             }

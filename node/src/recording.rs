@@ -90,10 +90,26 @@ pub struct RecordOptions {
     pub fsync: bool,
 }
 
-fn pose_msg(p: &Isometry3<f64>) -> Pose {
+pub(crate) fn pose_msg(p: &Isometry3<f64>) -> Pose {
     let t = p.translation.vector;
     let q = p.rotation.quaternion();
     Pose { position: Vector3::new(t.x, t.y, t.z), orientation: Quaternion { x: q.i, y: q.j, z: q.k, w: q.w } }
+}
+
+/// A detection's people as boxes in the map frame, numbered in the detector's order.
+pub(crate) fn person_boxes(d: &RobotDetection) -> Vec<PersonBox> {
+    d.found
+        .iter()
+        .enumerate()
+        .map(|(i, p)| PersonBox {
+            id: i as i32,
+            center_m: [p.centre_m.x, p.centre_m.y, p.centre_m.z],
+            size_m: [p.size_m.x, p.size_m.y, p.size_m.z],
+            yaw_rad: p.yaw_rad,
+            score: p.score as f32,
+            pose: p.pose,
+        })
+        .collect()
 }
 
 impl NodeRecorder {
@@ -224,19 +240,7 @@ impl NodeRecorder {
     }
 
     pub fn detections(&mut self, t_ns: u64, d: &RobotDetection) {
-        let people: Vec<PersonBox> = d
-            .found
-            .iter()
-            .enumerate()
-            .map(|(i, p)| PersonBox {
-                id: i as i32,
-                center_m: [p.centre_m.x, p.centre_m.y, p.centre_m.z],
-                size_m: [p.size_m.x, p.size_m.y, p.size_m.z],
-                yaw_rad: p.yaw_rad,
-                score: p.score as f32,
-            })
-            .collect();
-        self.send(Entry::Detections { t_ns, people });
+        self.send(Entry::Detections { t_ns, people: person_boxes(d) });
     }
 
     /// A published AR frame: its PNG (encoded on the writer thread unless a viewer already did).

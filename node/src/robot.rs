@@ -5,6 +5,7 @@
 
 use super::config::{driver_for, lio_config, RobotNodeConfig};
 use super::recording::{NodeRecorder, RecordOptions, RecordingCounts};
+use super::ros2::{Ros2Out, Ros2Summary};
 use super::tiles::LatestTiles;
 use super::wheels::{HostToLidar, WheelOdometry, WheelStep};
 use super::{wait_stop, Fed, LidarFeed, Stop};
@@ -37,6 +38,8 @@ pub struct RobotSummary {
     pub tiles_superseded: u64,
     /// What the recording queued and dropped (none: not recording, or it could not finish).
     pub recording: Option<RecordingCounts>,
+    /// What the ROS 2 bridge published and dropped (none: `[ros2]` off).
+    pub ros2: Option<Ros2Summary>,
     /// The Livox driver's devices, sessions and what it refused (spoofed senders, cut scans).
     pub livox: Option<starc_livox::live::DriverStats>,
     /// Feedback frames heard from the base's bus, twists handed to the LIO, and frames heard
@@ -86,6 +89,21 @@ pub async fn run(
     let (map_tx, map_thread) = spawn_map(map, period, tiles.clone())?;
     let record = RecordOptions { fsync: cfg.record_fsync };
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "robot", record)).transpose()?;
+    let (cmd_vel_tx, teleop) = match (cfg.ros2.enabled && cfg.ros2.cmd_vel, cfg.ros2.base_config.clone()) {
+        (true, Some(base)) => {
+            let (tx, rx) = tokio::sync::mpsc::channel(16);
+            let teleop = async move {
+                let result = super::teleop::drive(&base, rx).await;
+                if let Err(e) = &result {
+                    tracing::error!("/cmd_vel cannot drive the base: {e}");
+                }
+                result
+            };
+            (Some(tx), Some(tokio::spawn(teleop)))
+        }
+        _ => (None, None),
+    };
+    let mut ros2 = Ros2Out::start(&cfg.ros2, "robot", cmd_vel_tx)?;
     let link = Arc::new(LinkNode::open(&cfg.link, Role::Robot).await?);
     let tile_task = tokio::spawn(send_tiles(link.clone(), tiles.clone()));
     let (mut wheel_rx, wheel_task, mut wheels) = match &cfg.wheels {
@@ -130,7 +148,7 @@ pub async fn run(
             }
             ev = events.recv() => {
                 let Some(ev) = ev else { break };
-                match feed.take(ev, recorder.as_mut()) {
+                match feed.take(ev, recorder.as_mut(), ros2.as_mut()) {
                     Some(Fed::Scan { scan, clock, last_host_ns }) => {
                         let last_host_ns = last_host_ns.unwrap_or_else(host_now_ns);
                         host_to_lidar.scan(scan.end_ns, last_host_ns);
@@ -165,6 +183,9 @@ pub async fn run(
                         if let Some(r) = recorder.as_mut() {
                             r.detections(det.stamp_ns, &det);
                         }
+                        if let Some(b) = ros2.as_mut() {
+                            b.detections(det.stamp_ns, &det);
+                        }
                         if let Some(w) = &watch {
                             let _ = w.send(RobotEvent::Detection { detection: Box::new(det) });
                         }
@@ -175,6 +196,9 @@ pub async fn run(
                     publish(&link, &pose, &mut summary.publish_errors).await;
                     if let Some(r) = recorder.as_mut() {
                         r.pose(o.end_ns, &o.lidar_pose);
+                    }
+                    if let Some(b) = ros2.as_mut() {
+                        b.pose(o.end_ns, &o.lidar_pose);
                     }
                     if let Some(w) = &watch {
                         let _ = w.send(RobotEvent::Pose { end_ns: o.end_ns, lidar_pose: o.lidar_pose });
@@ -208,6 +232,15 @@ pub async fn run(
         match r.finish() {
             Ok(counts) => summary.recording = Some(counts),
             Err(e) => tracing::warn!("recording: {e}"),
+        }
+    }
+    summary.ros2 = ros2.take().map(Ros2Out::finish);
+    // The bridge's end closed /cmd_vel: the base is halted and its bus closed.
+    if let Some(t) = teleop {
+        match t.await {
+            Ok(Err(_)) => {} // logged when it failed
+            Err(e) => tracing::warn!("/cmd_vel task: {e}"),
+            Ok(Ok(())) => {}
         }
     }
     summary.livox = Some(driver.stats());

@@ -312,6 +312,7 @@ fn mission_live(dir: &Path, out: &Path, args: &Args) -> anyhow::Result<()> {
         view: starc_view::ViewConfig::default(),
         wheels: !args.no_wheels,
         detect: args.detector.config()?,
+        ros2: None,
     };
     super::sim_live::run(dir, &opts)
 }

@@ -65,6 +65,10 @@ pub struct Args {
     /// 0: the first accepted one at once).
     #[arg(long, default_value_t = starc_pipeline::mission::CONFIRM_FIRST_S)]
     confirm_first_s: f64,
+    /// Live mission: both nodes publish their topics to the ROS 2 (rmw_zenoh) router at this
+    /// zenoh endpoint (`tcp/127.0.0.1:7447`, `rmw_zenohd`'s default; docs/ros2.md).
+    #[arg(long, value_name = "ENDPOINT")]
+    ros2: Option<String>,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,
 }
@@ -186,6 +190,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             view,
             detect: args.detector.config()?,
             wheels: true,
+            ros2: args.ros2.clone(),
         };
         super::sim_live::run(&args.out, &opts)?;
     }

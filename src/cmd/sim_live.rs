@@ -53,6 +53,16 @@ pub struct LiveOptions {
     /// The robot node takes the base's wheels: the run's robot_can.log replayed in real time
     /// as its bus would carry it.
     pub wheels: bool,
+    /// Both nodes' ROS 2 bridge, to the rmw_zenoh router at this endpoint (`--ros2`).
+    pub ros2: Option<String>,
+}
+
+/// The nodes' `[ros2]` for `--ros2 ENDPOINT`: on, to that router; off without it.
+fn ros2_config(endpoint: Option<&str>) -> starc_link::ros2::Ros2Config {
+    match endpoint {
+        Some(e) => starc_link::ros2::Ros2Config { enabled: true, connect: vec![e.to_string()], ..Default::default() },
+        None => Default::default(),
+    }
 }
 
 /// Free loopback ports for the nodes: each socket is held until every port is chosen, so that
@@ -155,6 +165,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         record: Some(opts.out.join("robot.mcap")),
         record_fsync: false,
         link: link(Some(link_port), None)?,
+        ros2: ros2_config(opts.ros2.as_deref()),
     };
     let q = lidar_t_camera.rotation.quaternion();
     let c = lidar_t_camera.translation.vector;
@@ -177,6 +188,7 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         record_fsync: false,
         record_frames_every: 5,
         link: link(None, Some(link_port))?,
+        ros2: ros2_config(opts.ros2.as_deref()),
     };
     let schedule: Vec<(u64, u64)> = score.truth.frames.iter().map(|f| (f.index, f.t_ns)).collect();
 
@@ -443,6 +455,7 @@ mod tests {
             view: Default::default(),
             detect: Default::default(),
             wheels: false,
+            ros2: None,
         }
     }
 

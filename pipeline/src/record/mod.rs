@@ -20,14 +20,18 @@
 //! # Ok(()) }
 //! ```
 
+pub mod attachment;
+pub mod build;
 pub mod cdr;
 pub mod msgs;
 pub mod reader;
 pub mod scan;
 pub mod schema;
 pub mod sink;
+pub mod vision;
 pub mod writer;
 
+pub use build::MessageBuilder;
 pub use reader::{messages, summarize, Decoded, ReadMode, RecordedMessage, RecordingSummary};
 pub use writer::{ChunkCompression, Frames, PersonBox, Recorder, RecorderOptions, RecorderStats};
 

@@ -31,7 +31,7 @@ pub trait RosMessage: Cdr {
     }
 }
 
-fn seq<T: Cdr>(w: &mut CdrWriter, items: &[T]) {
+pub(crate) fn seq<T: Cdr>(w: &mut CdrWriter, items: &[T]) {
     w.len(items.len());
     for i in items {
         i.encode(w);
@@ -39,7 +39,7 @@ fn seq<T: Cdr>(w: &mut CdrWriter, items: &[T]) {
 }
 
 /// `min_bytes`: the smallest encoding of one `T`, which bounds the count a payload can hold.
-fn read_seq<T: Cdr>(r: &mut CdrReader<'_>, what: &str, min_bytes: usize) -> Result<Vec<T>, PipelineError> {
+pub(crate) fn read_seq<T: Cdr>(r: &mut CdrReader<'_>, what: &str, min_bytes: usize) -> Result<Vec<T>, PipelineError> {
     let n = r.seq_len(what, min_bytes)?;
     let mut out = Vec::with_capacity(n);
     for _ in 0..n {
@@ -167,6 +167,27 @@ impl Cdr for Pose {
     fn decode(r: &mut CdrReader<'_>) -> Result<Self, PipelineError> {
         Ok(Self { position: Vector3::decode(r)?, orientation: Quaternion::decode(r)? })
     }
+}
+
+/// `geometry_msgs/Twist`: linear (m/s) and angular (rad/s) velocity, as `/cmd_vel` carries it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+
+impl Cdr for Twist {
+    fn encode(&self, w: &mut CdrWriter) {
+        self.linear.encode(w);
+        self.angular.encode(w);
+    }
+    fn decode(r: &mut CdrReader<'_>) -> Result<Self, PipelineError> {
+        Ok(Self { linear: Vector3::decode(r)?, angular: Vector3::decode(r)? })
+    }
+}
+
+impl RosMessage for Twist {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/Twist";
 }
 
 /// `sensor_msgs/Imu`. A covariance whose first element is -1 means "not provided" (REP 145).
@@ -625,6 +646,7 @@ mod tests {
             data: vec![0, 0, 128, 63],
             is_dense: true,
         });
+        round_trip(&Twist { linear: Vector3::new(0.3, -0.1, 0.0), angular: Vector3::new(0.0, 0.0, 0.5) });
         round_trip(&CompressedImage { header: header(9, "fpv"), format: "png".into(), data: vec![1, 2, 3] });
         round_trip(&MarkerArray {
             markers: vec![Marker {

@@ -97,12 +97,40 @@ const TYPES: &[(&str, &str, &[&str])] = &[
         ],
     ),
     ("visualization_msgs/MarkerArray", "visualization_msgs/Marker[] markers\n", &["visualization_msgs/Marker"]),
+    ("vision_msgs/ObjectHypothesis", "string class_id\nfloat64 score\n", &[]),
+    (
+        "vision_msgs/ObjectHypothesisWithPose",
+        "vision_msgs/ObjectHypothesis hypothesis\ngeometry_msgs/PoseWithCovariance pose\n",
+        &["vision_msgs/ObjectHypothesis", "geometry_msgs/PoseWithCovariance"],
+    ),
+    (
+        "vision_msgs/BoundingBox3D",
+        "geometry_msgs/Pose center\ngeometry_msgs/Vector3 size\n",
+        &["geometry_msgs/Pose", "geometry_msgs/Vector3"],
+    ),
+    (
+        "vision_msgs/Detection3D",
+        "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\nvision_msgs/BoundingBox3D bbox\n\
+         string id\n",
+        &["std_msgs/Header", "vision_msgs/ObjectHypothesisWithPose", "vision_msgs/BoundingBox3D"],
+    ),
+    (
+        "vision_msgs/Detection3DArray",
+        "std_msgs/Header header\nvision_msgs/Detection3D[] detections\n",
+        &["std_msgs/Header", "vision_msgs/Detection3D"],
+    ),
 ];
 
 const SEPARATOR: &str = "================================================================================\n";
 
 fn lookup(name: &str) -> Option<&'static (&'static str, &'static str, &'static [&'static str])> {
     TYPES.iter().find(|(n, _, _)| *n == name)
+}
+
+/// A type's own fields (`pkg/msg/Type` or `pkg/Type`), constants included, one per line; `None`
+/// for a type this module does not know.
+pub fn own_fields(type_name: &str) -> Option<&'static str> {
+    lookup(&type_name.replacen("/msg/", "/", 1)).map(|(_, fields, _)| *fields)
 }
 
 /// The full `ros2msg` schema text for `type_name` (`pkg/msg/Type` or `pkg/Type`): its own fields,

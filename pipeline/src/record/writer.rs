@@ -6,10 +6,8 @@
 //! only the chunk still open is lost. Chunks close by size or by span of log time, whichever
 //! comes first, which bounds the loss in both bytes and seconds.
 
-use super::msgs::{
-    check_cloud, CanFrameMsg, ColorRgba, CompressedImage, Header, Imu, Marker, MarkerArray, Odometry, PointCloud2,
-    PointField, Pose, Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
-};
+use super::build::MessageBuilder;
+use super::msgs::{CanFrameMsg, Header, PointCloud2, PointField, Pose, RosMessage};
 use super::sink::{RetrySink, SinkGauge};
 use super::{schema, Topic};
 use crate::cloud::PointCloud;
@@ -93,6 +91,8 @@ pub struct PersonBox {
     pub size_m: [f64; 3],
     pub yaw_rad: f64,
     pub score: f32,
+    /// Standing, sitting or crouching, lying.
+    pub pose: crate::detect::PersonPose,
 }
 
 /// What has been written and what is safely in the file.
@@ -200,21 +200,13 @@ impl Recorder {
         Ok(room)
     }
 
-    fn stamp(&self, stamp: Stamp) -> Result<Time, PipelineError> {
-        if stamp.clock != self.options.clock {
-            return Err(PipelineError::Recording {
-                reason: format!(
-                    "stamp on the {} clock in a recording on the {} clock",
-                    stamp.clock, self.options.clock
-                ),
-            });
-        }
-        Time::from_ns(stamp.ns)
-            .ok_or_else(|| PipelineError::Recording { reason: format!("{} ns does not fit a ROS 2 time", stamp.ns) })
+    /// The messages' builder: this recording's clock and frames.
+    pub fn builder(&self) -> MessageBuilder {
+        MessageBuilder::new(self.options.clock, self.options.frames.clone())
     }
 
     fn header(&self, stamp: Stamp, frame_id: &str) -> Result<Header, PipelineError> {
-        Ok(Header { stamp: self.stamp(stamp)?, frame_id: frame_id.into() })
+        self.builder().header(stamp, frame_id)
     }
 
     fn channel(&mut self, topic: &str, type_name: &str) -> Result<u16, PipelineError> {
@@ -299,11 +291,7 @@ impl Recorder {
 
     /// As [`point_cloud`](Self::point_cloud) on another topic (a second device: `/fpv/points`).
     pub fn point_cloud_on(&mut self, topic: &str, cloud: &PointCloud) -> Result<(), PipelineError> {
-        let start = cloud
-            .start
-            .ok_or_else(|| PipelineError::Recording { reason: "a point cloud without a start time".into() })?;
-        let msg = cloud_to_msg(cloud, self.header(start, &self.options.frames.lidar.clone())?);
-        check_cloud(&msg)?;
+        let (start, msg) = self.builder().cloud(cloud)?;
         self.write(topic, start.ns, &msg)
     }
 
@@ -320,17 +308,7 @@ impl Recorder {
         gyro_rad_s: [f64; 3],
         acc_m_s2: [f64; 3],
     ) -> Result<(), PipelineError> {
-        let mut not_given = [0.0; 9];
-        not_given[0] = -1.0;
-        let msg = Imu {
-            header: self.header(stamp, &self.options.frames.imu.clone())?,
-            orientation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 0.0 },
-            orientation_covariance: not_given,
-            angular_velocity: Vector3::new(gyro_rad_s[0], gyro_rad_s[1], gyro_rad_s[2]),
-            angular_velocity_covariance: [0.0; 9],
-            linear_acceleration: Vector3::new(acc_m_s2[0], acc_m_s2[1], acc_m_s2[2]),
-            linear_acceleration_covariance: [0.0; 9],
-        };
+        let msg = self.builder().imu(stamp, gyro_rad_s, acc_m_s2)?;
         self.write(topic, stamp.ns, &msg)
     }
 
@@ -369,8 +347,7 @@ impl Recorder {
         pose: Pose,
         twist: [[f64; 3]; 2],
     ) -> Result<(), PipelineError> {
-        let base = self.options.frames.base.clone();
-        let msg = self.odometry_msg(stamp, frame, &base, pose, twist[0], twist[1])?;
+        let msg = self.builder().odometry(stamp, frame, &self.options.frames.base, pose, twist)?;
         self.write(topic.name(), stamp.ns, &msg)
     }
 
@@ -383,109 +360,33 @@ impl Recorder {
 
     /// The viewer's (FPV headset or camera) pose on `/fpv/odom`, in the map frame.
     pub fn fpv_odometry(&mut self, stamp: Stamp, pose: Pose) -> Result<(), PipelineError> {
-        let frames = self.options.frames.clone();
-        let msg = self.odometry_msg(stamp, &frames.map, &frames.fpv, pose, [0.0; 3], [0.0; 3])?;
+        let frames = &self.options.frames;
+        let msg = self.builder().odometry(stamp, &frames.map, &frames.fpv, pose, [[0.0; 3]; 2])?;
         self.write(Topic::FpvOdom.name(), stamp.ns, &msg)
-    }
-
-    fn odometry_msg(
-        &self,
-        stamp: Stamp,
-        frame: &str,
-        child: &str,
-        pose: Pose,
-        linear_m_s: [f64; 3],
-        angular_rad_s: [f64; 3],
-    ) -> Result<Odometry, PipelineError> {
-        Ok(Odometry {
-            header: self.header(stamp, frame)?,
-            child_frame_id: child.into(),
-            pose,
-            pose_covariance: [0.0; 36],
-            twist: (
-                Vector3::new(linear_m_s[0], linear_m_s[1], linear_m_s[2]),
-                Vector3::new(angular_rad_s[0], angular_rad_s[1], angular_rad_s[2]),
-            ),
-            twist_covariance: [0.0; 36],
-        })
     }
 
     /// Transforms on `/tf`: each `(parent, child, translation + rotation)` at `stamp`.
     pub fn tf(&mut self, stamp: Stamp, transforms: &[(&str, &str, Pose)]) -> Result<(), PipelineError> {
-        let msg = self.tf_msg(stamp, transforms)?;
+        let msg = self.builder().tf(stamp, transforms)?;
         self.write(Topic::Tf.name(), stamp.ns, &msg)
     }
 
     /// Fixed transforms (extrinsics) on `/tf_static`; write them once, at the start.
     pub fn tf_static(&mut self, stamp: Stamp, transforms: &[(&str, &str, Pose)]) -> Result<(), PipelineError> {
-        let msg = self.tf_msg(stamp, transforms)?;
+        let msg = self.builder().tf(stamp, transforms)?;
         self.write(Topic::TfStatic.name(), stamp.ns, &msg)
-    }
-
-    fn tf_msg(&self, stamp: Stamp, transforms: &[(&str, &str, Pose)]) -> Result<TfMessage, PipelineError> {
-        let header = self.header(stamp, "")?;
-        let transforms = transforms
-            .iter()
-            .map(|(parent, child, pose)| TransformStamped {
-                header: Header { stamp: header.stamp, frame_id: (*parent).into() },
-                child_frame_id: (*child).into(),
-                translation: pose.position,
-                rotation: pose.orientation,
-            })
-            .collect();
-        Ok(TfMessage { transforms })
     }
 
     /// Detected people on `/detections/markers`, in the map frame: a DELETEALL marker (so boxes
     /// of people no longer seen disappear), then one translucent cube and one score label each.
     pub fn detections(&mut self, stamp: Stamp, people: &[PersonBox]) -> Result<(), PipelineError> {
-        let header = self.header(stamp, &self.options.frames.map.clone())?;
-        let mut markers = Vec::with_capacity(1 + 2 * people.len());
-        // Empty namespace: every ROS 2 version reads that as "all markers on this topic".
-        markers.push(Marker { header: header.clone(), action: Marker::DELETE_ALL, ..Marker::default() });
-        for p in people {
-            let (s, c) = (p.yaw_rad / 2.0).sin_cos();
-            let pose = Pose {
-                position: Vector3::new(p.center_m[0], p.center_m[1], p.center_m[2]),
-                orientation: Quaternion { x: 0.0, y: 0.0, z: s, w: c },
-            };
-            markers.push(Marker {
-                header: header.clone(),
-                ns: "people".into(),
-                id: p.id,
-                kind: Marker::CUBE,
-                action: Marker::ADD,
-                pose,
-                scale: Vector3::new(p.size_m[0], p.size_m[1], p.size_m[2]),
-                color: ColorRgba { r: 1.0, g: 0.35, b: 0.1, a: 0.5 },
-                ..Marker::default()
-            });
-            let mut label_pose = pose;
-            label_pose.position.z += p.size_m[2] / 2.0 + 0.2;
-            markers.push(Marker {
-                header: header.clone(),
-                ns: "people_labels".into(),
-                id: p.id,
-                kind: Marker::TEXT_VIEW_FACING,
-                action: Marker::ADD,
-                pose: label_pose,
-                scale: Vector3::new(0.0, 0.0, 0.25),
-                color: ColorRgba { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
-                text: format!("person {} ({:.2})", p.id, p.score),
-                ..Marker::default()
-            });
-        }
-        self.write(Topic::DetectionMarkers.name(), stamp.ns, &MarkerArray { markers })
+        let msg = self.builder().markers(stamp, people)?;
+        self.write(Topic::DetectionMarkers.name(), stamp.ns, &msg)
     }
 
     /// The AR view as shown to the user, PNG-encoded, on `/fpv/ar_image/compressed`.
     pub fn ar_image_png(&mut self, stamp: Stamp, png: &[u8]) -> Result<(), PipelineError> {
-        super::cdr::check_len(CompressedImage::TYPE_NAME, "data", png.len())?;
-        let msg = CompressedImage {
-            header: self.header(stamp, &self.options.frames.fpv.clone())?,
-            format: "png".into(),
-            data: png.to_vec(),
-        };
+        let msg = self.builder().png_image(stamp, png)?;
         self.write(Topic::ArImage.name(), stamp.ns, &msg)
     }
 
