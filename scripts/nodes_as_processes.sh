@@ -4,6 +4,7 @@
 # node and the rig node, each with its own peak RSS.
 #
 #   scripts/nodes_as_processes.sh [SIM_DIR [OUT_DIR]]
+#   ROS2_CONNECT=tcp/127.0.0.1:7447 scripts/nodes_as_processes.sh ...   # both nodes' ROS 2 bridge on
 #
 # SIM_DIR (default /tmp/lab_proc) is simulated first when it has no avia.pcap. OUT_DIR (default
 # SIM_DIR/processes) gets each process's log, each node's summary (robot.json, fpv.json) and
@@ -32,6 +33,11 @@ mkdir -p "$OUT"
 # The node configs, recording next to their copies in OUT.
 sed 's/^# record = /record = /' "$ROOT/config/loopback/robot.toml" > "$OUT/robot.toml"
 sed 's/^# record = /record = /' "$ROOT/config/loopback/fpv.toml" > "$OUT/fpv.toml"
+if [ -n "${ROS2_CONNECT:-}" ]; then
+    for f in "$OUT/robot.toml" "$OUT/fpv.toml"; do
+        printf '\n[ros2]\nenabled = true\nconnect = ["%s"]\n' "$ROS2_CONNECT" >> "$f"
+    done
+fi
 
 LIMIT=$((LEAD_S + PLAY_S + TAIL_S + 30))
 START=$(( $(date +%s%N) + LEAD_S * 1000000000 ))
@@ -54,12 +60,20 @@ hwm() {
     pid=$(pgrep -P "$1" -x starc) || { echo "? (exited)"; return; }
     awk '/VmHWM/ {printf "%.1f", $2 / 1024}' "/proc/$pid/status" || echo "?"
 }
+# CPU seconds (user + system) the node's process has used.
+cpu() {
+    local pid
+    pid=$(pgrep -P "$1" -x starc) || { echo "?"; return; }
+    awk -v hz="$(getconf CLK_TCK)" '{printf "%.2f", ($14 + $15) / hz}' "/proc/$pid/stat" || echo "?"
+}
 robot_hwm=$(hwm "$robot"); rig_hwm=$(hwm "$rig")
+robot_cpu=$(cpu "$robot"); rig_cpu=$(cpu "$rig")
 for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done
 wait "${pids[@]}" || true
 pids=()
 
 echo "VmHWM just before SIGINT: robot node ${robot_hwm} MiB, rig node ${rig_hwm} MiB"
+echo "CPU just before SIGINT: robot node ${robot_cpu} s, rig node ${rig_cpu} s"
 echo "robot node summary:"; cat "$OUT/robot.json"
 echo "rig node summary:"; cat "$OUT/fpv.json"
 echo "mocks:"; grep -h "sent" "$OUT"/mock_*.txt || true

@@ -86,7 +86,8 @@ async fn drive_through_router(python: &PathBuf, cmd_vel_from: &str) -> (serde_js
         ..Ros2Config::default()
     };
     let (tx, rx) = tokio::sync::mpsc::channel(16);
-    let teleop = tokio::spawn(async move { starc_node::teleop::drive(&base_toml, rx).await });
+    let silent = std::time::Duration::from_millis(cfg.cmd_vel_timeout_ms);
+    let teleop = tokio::spawn(async move { starc_node::teleop::drive(&base_toml, rx, silent).await });
     let bridge = Ros2Out::start(&cfg, "robot", Some(tx)).unwrap().unwrap();
 
     // Wheel 1's speed (rpm) against the host clock while the peer runs.
@@ -121,9 +122,9 @@ async fn cmd_vel_moves_the_base_within_its_limits_and_silence_stops_it() {
     // Moved, and no faster than the 1 m/s limit allows (2 m/s was asked for).
     assert!(peak > 0.8 * WHEEL1_RPM_AT_LIMIT, "peak {peak:.0} rpm");
     assert!(peak < 1.05 * WHEEL1_RPM_AT_LIMIT, "peak {peak:.0} rpm past the limit's {WHEEL1_RPM_AT_LIMIT:.0}");
-    // Silence: braking begins within 200 ms of the last /cmd_vel (the bridge stops the base after
-    // 100 ms, its watchdog would after 200 ms), and the wheel is at rest once the ramp down at
-    // 8 m/s^2 (125 ms from 1 m/s) and the drive's own lag have passed.
+    // Silence: the bridge stops the base 100 ms after the last /cmd_vel (its watchdog would at
+    // 200 ms), so the wheel is slowing within 200 ms, and at rest once the ramp down at 8 m/s^2
+    // (125 ms from 1 m/s) and the drive's own lag have passed.
     let after = |ms: u64| trace.iter().filter(move |(t, _)| *t >= last_ns + ms * 1_000_000).map(|(_, v)| v.abs());
     let slowing_ms = trace
         .iter()

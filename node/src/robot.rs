@@ -92,8 +92,9 @@ pub async fn run(
     let (cmd_vel_tx, teleop) = match (cfg.ros2.enabled && cfg.ros2.cmd_vel, cfg.ros2.base_config.clone()) {
         (true, Some(base)) => {
             let (tx, rx) = tokio::sync::mpsc::channel(16);
+            let silent = Duration::from_millis(cfg.ros2.cmd_vel_timeout_ms);
             let teleop = async move {
-                let result = super::teleop::drive(&base, rx).await;
+                let result = super::teleop::drive(&base, rx, silent).await;
                 if let Err(e) = &result {
                     tracing::error!("/cmd_vel cannot drive the base: {e}");
                 }

@@ -205,3 +205,16 @@ pub fn hash(distro: Distro, type_name: &str) -> Result<String, LinkError> {
         Distro::Humble => Ok("TypeHashNotSupported".into()),
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn humble_keys_carry_no_type_hash() {
+        assert_eq!(hash(Distro::Humble, TWIST).unwrap(), "TypeHashNotSupported");
+        assert_eq!(hash(Distro::Jazzy, TWIST).unwrap(), rihs01(TWIST).unwrap());
+        assert!(hash(Distro::Jazzy, "geometry_msgs/msg/Nope").is_err());
+    }
+}

@@ -51,6 +51,11 @@ pub struct Ros2Config {
     /// The node then drives the base; `starc base drive` must not run beside it.
     #[serde(default)]
     pub base_config: Option<PathBuf>,
+    /// With `cmd_vel`: `/cmd_vel` silent this long and the base is told to stop (it ramps down
+    /// at its deceleration limits). Under the base's own watchdog (200 ms), twice the gaps of a
+    /// 20 Hz publisher (Nav2's controller, teleop_twist_joy).
+    #[serde(default = "default_cmd_vel_timeout_ms")]
+    pub cmd_vel_timeout_ms: u64,
     /// Messages waiting for the bridge; past this the oldest kinds are dropped and counted, so a
     /// slow router never holds up a scan.
     #[serde(default = "default_queue")]
@@ -62,6 +67,10 @@ pub struct Ros2Config {
 
 fn default_connect() -> Vec<String> {
     vec![DEFAULT_ROUTER.into()]
+}
+
+fn default_cmd_vel_timeout_ms() -> u64 {
+    100
 }
 
 fn default_queue() -> usize {
@@ -85,6 +94,7 @@ impl Default for Ros2Config {
             cmd_vel: false,
             cmd_vel_from: Vec::new(),
             base_config: None,
+            cmd_vel_timeout_ms: default_cmd_vel_timeout_ms(),
             queue: default_queue(),
             image_every: 1,
         }
@@ -131,6 +141,9 @@ impl Ros2Config {
         }
         if self.connect.is_empty() {
             return bad("ros2.connect", "the ROS 2 router's endpoint is needed".into());
+        }
+        if self.cmd_vel_timeout_ms == 0 {
+            return bad("ros2.cmd_vel_timeout_ms", "must be > 0".into());
         }
         if self.queue == 0 {
             return bad("ros2.queue", "must be > 0".into());
