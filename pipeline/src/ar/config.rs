@@ -19,11 +19,14 @@ pub struct RenderConfig {
     /// A person whose detection is older than this is drawn dimmed (the overlay may lag the
     /// person), and the status line flags the detection age as stale.
     pub stale_after_ms: f64,
+    /// Over each person in view, their distance from the camera (and their detection's age once
+    /// stale); for each person out of view, an arrow at the frame's edge with the distance.
+    pub label_people: bool,
 }
 
 impl Default for RenderConfig {
     fn default() -> Self {
-        Self { draw_boxes: true, point_radius_px: 2, max_depth_m: 30.0, stale_after_ms: 500.0 }
+        Self { draw_boxes: true, point_radius_px: 2, max_depth_m: 30.0, stale_after_ms: 500.0, label_people: true }
     }
 }
 

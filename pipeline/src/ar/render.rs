@@ -1,5 +1,5 @@
-//! Drawing one AR frame: background, the rig's own points by depth, people in red on top, box
-//! wireframes, the status line.
+//! Drawing one AR frame: background, the rig's own points by depth, box wireframes, each
+//! person's distance label or edge arrow, people in red on top, the status line.
 
 use super::font::{draw_text, GLYPH_H};
 use super::{project_people, ArFrame, ArPerson, ArStatus, CameraModel, OrientedBox, RenderConfig, NEAR_M};
@@ -60,6 +60,9 @@ pub fn render(
                     draw_box(&mut frame, camera, &camera_t_world, b, colour(p));
                 }
             }
+        }
+        if cfg.label_people {
+            super::labels::draw_people_labels(&mut frame, camera, world_t_camera, people, stale_ns, colour);
         }
         let mut projected = Vec::with_capacity(people.iter().map(|p| p.points_world.len()).sum());
         project_people(camera, world_t_camera, people, &mut projected);

@@ -267,3 +267,57 @@ fn shipped_config_is_the_default() {
     assert!(toml::from_str::<CameraModel>("width = 1\nheight = 1\nfx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\nk1 = 0.1")
         .is_err());
 }
+
+#[test]
+fn label_text_gives_the_distance_and_a_stale_age() {
+    use super::labels::label_text;
+    assert_eq!(label_text(4.96, 100_000_000, 500e6), "5.0 M");
+    assert_eq!(label_text(12.34, 2_100_000_000, 500e6), "12.3 M 2.1 S");
+}
+
+/// The label plate's text pixels above a person in view, and none with labels off.
+#[test]
+fn a_person_in_view_is_labelled_with_their_distance() {
+    use super::labels::COLOUR_LABEL;
+    let cam = CameraModel::default();
+    let bbox = OrientedBox { centre_m: Vector3::new(5.0, 0.0, 1.5), size_m: Vector3::new(0.5, 0.5, 1.8), yaw_rad: 0.0 };
+    let people = [ArPerson { points_world: vec![], bbox: Some(bbox), age_ns: 0 }];
+    let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &RenderConfig::default());
+    // "5.0 M" at scale 2, centred on u = 320, just over the box's top (z 2.4 m: v = 240 - 460 *
+    // 0.9 / 5 = 157): text rows 137-151.
+    let label: usize = (130..160)
+        .flat_map(|v| (280..360).map(move |u| (u, v)))
+        .filter(|&(u, v)| frame.pixel(u, v) == Some(COLOUR_LABEL))
+        .count();
+    assert!(label > 40, "{label} label pixels");
+    assert_eq!(count(&frame, COLOUR_LABEL), label, "label pixels elsewhere");
+    let cfg = RenderConfig { label_people: false, ..RenderConfig::default() };
+    let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &cfg);
+    assert_eq!(count(&frame, COLOUR_LABEL), 0);
+}
+
+/// A person to the responder's left (world +y) gets an arrow at the left edge; one behind gets
+/// one too, and nothing is drawn in the middle of the frame.
+#[test]
+fn people_out_of_view_get_an_arrow_at_the_edge() {
+    use super::labels::COLOUR_LABEL;
+    let cam = CameraModel::default();
+    let left = person_at(&[[0.0, 5.0, 1.5]], 0);
+    let frame = render(&cam, &camera_pose(), &[], &[left], &aligned(), &RenderConfig::default());
+    let arrow_left = (0..40)
+        .flat_map(|u| (200..280).map(move |v| (u, v)))
+        .filter(|&(u, v)| frame.pixel(u, v) == Some(COLOUR_PERSON))
+        .count();
+    assert!(arrow_left > 50, "{arrow_left} arrow pixels at the left edge");
+    assert_eq!(frame.pixel(320, 240), Some([10, 10, 14]));
+    assert!(count(&frame, COLOUR_LABEL) > 20, "the distance beside the arrow");
+    // Behind: the arrow at the bottom edge, pointing down (turn around).
+    let behind = person_at(&[[-5.0, 0.0, 1.5]], 0);
+    let frame = render(&cam, &camera_pose(), &[], &[behind], &aligned(), &RenderConfig::default());
+    let arrow_bottom = (280..360)
+        .flat_map(|u| (440..480).map(move |v| (u, v)))
+        .filter(|&(u, v)| frame.pixel(u, v) == Some(COLOUR_PERSON))
+        .count();
+    assert!(arrow_bottom > 50, "{arrow_bottom} arrow pixels at the bottom edge");
+    assert_eq!(frame.pixel(320, 240), Some([10, 10, 14]));
+}
