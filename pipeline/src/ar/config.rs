@@ -13,9 +13,14 @@ pub struct RenderConfig {
     /// Radius of a person's point, in pixels (0: one pixel). The rig's own points are always one
     /// pixel.
     pub point_radius_px: u32,
-    /// The rig's points farther than this are not drawn; their shading runs from bright (near)
-    /// to dark (this far). People are drawn at any depth.
+    /// The rig's points farther than this are not drawn. People are drawn at any depth.
     pub max_depth_m: f64,
+    /// The rig's points are shaded from bright (near) to dark at this depth and beyond: indoors
+    /// most of what matters is within it, and the contrast shows the room's shape.
+    pub shade_depth_m: f64,
+    /// Each of the rig's points is drawn as a square this wide in the world (the view's voxel),
+    /// so near surfaces stay surfaces: 1 to `MAX_SPLAT_PX` pixels on screen.
+    pub point_size_m: f64,
     /// A person whose detection is older than this is drawn dimmed (the overlay may lag the
     /// person), and the status line flags the detection age as stale.
     pub stale_after_ms: f64,
@@ -26,7 +31,15 @@ pub struct RenderConfig {
 
 impl Default for RenderConfig {
     fn default() -> Self {
-        Self { draw_boxes: true, point_radius_px: 2, max_depth_m: 30.0, stale_after_ms: 500.0, label_people: true }
+        Self {
+            draw_boxes: true,
+            point_radius_px: 2,
+            max_depth_m: 30.0,
+            shade_depth_m: 6.0,
+            point_size_m: 0.04,
+            stale_after_ms: 500.0,
+            label_people: true,
+        }
     }
 }
 
@@ -44,6 +57,12 @@ impl RenderConfig {
         let bad = |reason: String| Err(PipelineError::BadFile { format: "AR config", reason });
         if !(self.max_depth_m.is_finite() && self.max_depth_m > 0.0) {
             return bad(format!("max_depth_m must be positive, not {}", self.max_depth_m));
+        }
+        if !(self.shade_depth_m.is_finite() && self.shade_depth_m > 0.0) {
+            return bad(format!("shade_depth_m must be positive, not {}", self.shade_depth_m));
+        }
+        if !(self.point_size_m.is_finite() && self.point_size_m >= 0.0) {
+            return bad(format!("point_size_m must be >= 0, not {}", self.point_size_m));
         }
         if self.stale_after_ms.is_nan() || self.stale_after_ms < 0.0 {
             return bad(format!("stale_after_ms must be >= 0, not {}", self.stale_after_ms));

@@ -17,6 +17,8 @@ const COLOUR_TEXT: [u8; 3] = [225, 225, 225];
 /// The rig's points: bright blue-grey when near, fading to near-background at `max_depth_m`.
 const COLOUR_RIG_NEAR: [f64; 3] = [170.0, 190.0, 230.0];
 const COLOUR_RIG_FAR: [f64; 3] = [30.0, 34.0, 50.0];
+/// The largest square a rig point is drawn as (pixels), however near.
+pub const MAX_SPLAT_PX: usize = 6;
 /// No side of a frame is larger than this (a corrupt camera model must not allocate gigabytes).
 const MAX_SIDE_PX: u32 = 8192;
 
@@ -106,10 +108,20 @@ fn draw_rig_points(
             continue;
         }
         *d = z;
-        let t = (c.z / cfg.max_depth_m).clamp(0.0, 1.0);
+        let t = (c.z / cfg.shade_depth_m).clamp(0.0, 1.0);
         let shade: [u8; 3] =
             std::array::from_fn(|k| (COLOUR_RIG_NEAR[k] + (COLOUR_RIG_FAR[k] - COLOUR_RIG_NEAR[k]) * t) as u8);
         frame.put(x as i64, y as i64, shade);
+        // The rest of its square, where nothing nearer is drawn.
+        let side = ((cfg.point_size_m * camera.fx / c.z) as usize).clamp(1, MAX_SPLAT_PX);
+        for sy in y.saturating_sub(side / 2)..(y + side.div_ceil(2)).min(h) {
+            for sx in x.saturating_sub(side / 2)..(x + side.div_ceil(2)).min(w) {
+                if let Some(d) = depth.get_mut(sy * w + sx).filter(|d| z < **d) {
+                    *d = z;
+                    frame.put(sx as i64, sy as i64, shade);
+                }
+            }
+        }
     }
 }
 

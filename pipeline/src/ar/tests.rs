@@ -321,3 +321,32 @@ fn people_out_of_view_get_an_arrow_at_the_edge() {
     assert!(arrow_bottom > 50, "{arrow_bottom} arrow pixels at the bottom edge");
     assert_eq!(frame.pixel(320, 240), Some([10, 10, 14]));
 }
+
+/// A near rig point is drawn as a square (`point_size_m` wide in the world, at most
+/// `MAX_SPLAT_PX`), a far one as one pixel; nearer points win where squares overlap.
+#[test]
+fn rig_points_are_squares_that_shrink_with_depth() {
+    use super::render::MAX_SPLAT_PX;
+    let cam = CameraModel::default();
+    let background = [10, 10, 14];
+    let drawn = |points: &[Vector3<f64>]| {
+        let frame = render(&cam, &camera_pose(), points, &[], &aligned(), &RenderConfig::default());
+        frame.rgb.chunks_exact(3).skip(640 * 30).filter(|px| *px != background).count()
+    };
+    // 1 m ahead: 0.04 * 460 / 1 = 18 px, capped.
+    assert_eq!(drawn(&[Vector3::new(1.0, 0.0, 1.5)]), MAX_SPLAT_PX * MAX_SPLAT_PX);
+    // 9.2 m: 2 px; 20 m: 1 px.
+    assert_eq!(drawn(&[Vector3::new(9.2, 0.0, 1.5)]), 4);
+    assert_eq!(drawn(&[Vector3::new(20.0, 0.0, 1.5)]), 1);
+    let near_over_far = render(
+        &cam,
+        &camera_pose(),
+        &[Vector3::new(20.0, 0.0, 1.5), Vector3::new(1.0, 0.0, 1.5)],
+        &[],
+        &aligned(),
+        &RenderConfig::default(),
+    );
+    let far_shade =
+        render(&cam, &camera_pose(), &[Vector3::new(20.0, 0.0, 1.5)], &[], &aligned(), &RenderConfig::default());
+    assert_ne!(near_over_far.pixel(320, 240), far_shade.pixel(320, 240));
+}

@@ -20,6 +20,7 @@ mod rig_side;
 mod robot;
 mod robot_map;
 mod sent_people;
+pub mod view_cloud;
 mod waiting;
 
 pub use input::{MissionInput, Side};
@@ -49,8 +50,8 @@ pub struct View {
     pub detection_age_ms: Option<f64>,
 }
 
-/// The responder's frame at `t_ns` (rig LiDAR clock): the rig's newest scan shaded by depth and,
-/// once aligned, the people the robot saw, through the walls.
+/// The responder's frame at `t_ns` (rig LiDAR clock): the rig's points of the last seconds
+/// shaded by depth and, once aligned, the people the robot saw, through the walls.
 pub fn render_view(
     camera: &CameraModel,
     lidar_t_camera: &Isometry3<f64>,
@@ -69,7 +70,7 @@ pub fn render_view(
     // The rig's own points live in its odometry frame: into the world with the correction.
     let correction = rig.world().correction().unwrap_or_else(Isometry3::identity);
     let rig_points: Vec<Vector3<f64>> =
-        rig.scan_points().iter().map(|p| correction * nalgebra::Point3::from(*p)).map(|p| p.coords).collect();
+        rig.view_points().map(|p| correction * nalgebra::Point3::from(*p)).map(|p| p.coords).collect();
     let people = if aligned { overlay.at(t_ns) } else { Vec::new() };
     let detection_age_ms = people.iter().map(|p| p.age_ns).min().map(|a| a as f64 * 1e-6);
     let status = ArStatus {

@@ -8,6 +8,7 @@
 
 use super::place::{ScanPlacer, ScanPoses};
 use super::rig_history::{with_history, RigHistory};
+use super::view_cloud::ViewCloud;
 use super::waiting::Waiting;
 use crate::align::{
     filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
@@ -74,6 +75,10 @@ pub struct RigCoreConfig {
     /// Two searches agree when they place the rig's odometry frame within this of each other.
     pub confirm_agree_m: f64,
     pub confirm_agree_deg: f64,
+    /// The view draws the rig's points of this long (the newest per `view_voxel_m` voxel;
+    /// 0: the newest scan alone).
+    pub view_keep_ns: u64,
+    pub view_voxel_m: f64,
 }
 
 impl Default for RigCoreConfig {
@@ -106,6 +111,8 @@ impl Default for RigCoreConfig {
             confirm_span_ns: (CONFIRM_FIRST_S * 1e9) as u64,
             confirm_agree_m: 0.3,
             confirm_agree_deg: 3.0,
+            view_keep_ns: 3_000_000_000,
+            view_voxel_m: 0.08,
         }
     }
 }
@@ -372,6 +379,8 @@ pub struct RigCore {
     candidate: Option<Candidate>,
     /// What the first searches' windows held (see `RigCoreConfig::first_history_ns`).
     history: RigHistory,
+    /// What the view draws of the rig's surroundings.
+    view: ViewCloud,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -409,6 +418,7 @@ impl RigCore {
             waiting_for: None,
             candidate: None,
             history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
+            view: ViewCloud::new(cfg.view_voxel_m, cfg.view_keep_ns),
             cfg,
         })
     }
@@ -482,6 +492,7 @@ impl RigCore {
         for o in std::mem::take(&mut self.outs) {
             let placed = self.placer.place(&o);
             self.points = placed.iter().map(|p| p.xyz()).collect();
+            self.view.add(&self.points, o.end_ns);
             let _ = self.world.push_odometry(o.end_ns, o.lidar_pose);
             let _ = self.odom.push(o.end_ns, o.lidar_pose);
             if self.first_ns.is_none() {
@@ -498,6 +509,12 @@ impl RigCore {
     /// The newest scan's points, in the rig's odometry frame.
     pub fn scan_points(&self) -> &[Vector3<f64>] {
         &self.points
+    }
+
+    /// The rig's points of the last `view_keep_ns`, one per voxel, in its odometry frame: what
+    /// the view draws of the surroundings.
+    pub fn view_points(&self) -> impl Iterator<Item = &Vector3<f64>> {
+        self.view.points()
     }
 
     pub fn first_ns(&self) -> Option<u64> {
