@@ -27,6 +27,10 @@ pub struct RenderConfig {
     /// Over each person in view, their distance from the camera (and their detection's age once
     /// stale); for each person out of view, an arrow at the frame's edge with the distance.
     pub label_people: bool,
+    /// Side of the top-down map in the lower right corner, pixels (0: none); it shows the
+    /// robot's map `inset_range_m` around the responder, heading-up, once aligned.
+    pub inset_px: u32,
+    pub inset_range_m: f64,
 }
 
 impl Default for RenderConfig {
@@ -39,6 +43,8 @@ impl Default for RenderConfig {
             point_size_m: 0.04,
             stale_after_ms: 500.0,
             label_people: true,
+            inset_px: 160,
+            inset_range_m: 8.0,
         }
     }
 }
@@ -66,6 +72,9 @@ impl RenderConfig {
         }
         if self.stale_after_ms.is_nan() || self.stale_after_ms < 0.0 {
             return bad(format!("stale_after_ms must be >= 0, not {}", self.stale_after_ms));
+        }
+        if !(self.inset_range_m.is_finite() && self.inset_range_m > 0.0) {
+            return bad(format!("inset_range_m must be positive, not {}", self.inset_range_m));
         }
         if self.point_radius_px > 32 {
             return bad(format!("point_radius_px must be <= 32, not {}", self.point_radius_px));

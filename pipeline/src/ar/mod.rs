@@ -22,6 +22,7 @@ mod camera;
 mod config;
 pub mod font;
 mod frame;
+pub mod inset;
 pub mod labels;
 mod mask;
 mod render;

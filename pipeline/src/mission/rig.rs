@@ -14,6 +14,7 @@ use crate::align::{
     filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
     PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
 };
+use crate::ar::inset::MapRaster;
 use crate::ar::OrientedBox;
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
@@ -80,6 +81,9 @@ pub struct RigCoreConfig {
     pub view_keep_ns: u64,
     pub view_voxel_m: f64,
 }
+
+/// Cell of the map's top-down raster for the view's inset.
+const INSET_CELL_M: f64 = 0.1;
 
 impl Default for RigCoreConfig {
     fn default() -> Self {
@@ -381,6 +385,8 @@ pub struct RigCore {
     history: RigHistory,
     /// What the view draws of the rig's surroundings.
     view: ViewCloud,
+    /// The robot's map from above, for the view's inset.
+    map_raster: Option<Arc<MapRaster>>,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -419,6 +425,7 @@ impl RigCore {
             candidate: None,
             history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
             view: ViewCloud::new(cfg.view_voxel_m, cfg.view_keep_ns),
+            map_raster: None,
             cfg,
         })
     }
@@ -462,7 +469,13 @@ impl RigCore {
     /// previous one.
     pub fn set_map(&mut self, points: Vec<Vector3<f64>>) {
         self.map_raw_len = points.len();
+        self.map_raster = MapRaster::from_points(&points, INSET_CELL_M).map(Arc::new);
         self.map = Arc::new(points);
+    }
+
+    /// The robot's map from above (for the view's inset), as of the last [`Self::set_map`].
+    pub fn map_raster(&self) -> Option<&MapRaster> {
+        self.map_raster.as_deref()
     }
 
     pub fn map_len(&self) -> usize {
