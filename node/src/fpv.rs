@@ -289,6 +289,10 @@ impl RigNode {
                 }
                 take == DetectionTake::Held
             }
+            LinkMessage::RobotPose { world_t_lidar, .. } => {
+                self.side.push_robot_pose(&world_t_lidar);
+                false
+            }
             _ => false,
         }
     }

@@ -19,6 +19,8 @@ const COLOUR_INSET_BACKGROUND: [u8; 3] = [0, 0, 0];
 const COLOUR_INSET_WALL: [u8; 3] = [150, 160, 180];
 const COLOUR_INSET_FRAME: [u8; 3] = [90, 90, 100];
 const COLOUR_RESPONDER: [u8; 3] = [60, 220, 90];
+/// The robot in the inset.
+pub const COLOUR_ROBOT: [u8; 3] = [80, 150, 255];
 
 /// The robot's map seen from above: per cell, which height slices hold a point.
 pub struct MapRaster {
@@ -96,12 +98,13 @@ pub struct InsetLayout {
 /// Draws the inset in the frame's lower right corner: the map's cells in the responder's
 /// height band (`BAND_BELOW_M` below the rig to `BAND_ABOVE_M` above it, where walls, doors and
 /// furniture are and floors and ceilings are not), turned so that the responder's heading points up; the responder as a green arrow at
-/// the centre; each person within range as a dot of `colours[i]`.
+/// the centre; each person within range, and the robot, as a dot of its colour.
 pub fn draw_inset(
     frame: &mut ArFrame,
     raster: Option<&MapRaster>,
     world_t_rig: &Isometry3<f64>,
     people: &[(Vector3<f64>, [u8; 3])],
+    robot: Option<(Vector3<f64>, [u8; 3])>,
     layout: InsetLayout,
 ) {
     let side = layout.side_px.min(frame.width.saturating_sub(8)).min(frame.height.saturating_sub(8));
@@ -133,7 +136,7 @@ pub fn draw_inset(
         }
     }
     let centre = (f64::from(x0) + half, f64::from(y0) + half);
-    for (p, colour) in people {
+    for (p, colour) in people.iter().chain(robot.iter()) {
         let d = p - here;
         // World offset to (right, up) in the inset.
         let (up, right) = (c * d.x + s * d.y, s * d.x - c * d.y);
@@ -193,7 +196,7 @@ mod tests {
         // At (5, 5) facing +x: the wall x = 10 is 5 m ahead (up); facing +y, the wall y = 10 is.
         for (yaw, ahead) in [(0.0, "x = 10"), (90.0, "y = 10"), (-90.0, "y = 0")] {
             let mut frame = ArFrame::filled(640, 480, [10, 10, 14]);
-            draw_inset(&mut frame, Some(&raster), &pose(5.0, 5.0, yaw), &[], LAYOUT);
+            draw_inset(&mut frame, Some(&raster), &pose(5.0, 5.0, yaw), &[], None, LAYOUT);
             let (u, v) = px(&frame, 0.0, 5.0);
             let wall_ahead = (v - 2..v + 3).any(|v| frame.pixel(u, v) == Some(COLOUR_INSET_WALL));
             assert!(wall_ahead, "facing {yaw} deg: the wall {ahead} is not up");
@@ -210,16 +213,20 @@ mod tests {
         let mut frame = ArFrame::filled(640, 480, [10, 10, 14]);
         // Facing +y from (5, 5): a person at (3, 8) is 3 m ahead and 2 m to the left.
         let people = [(Vector3::new(3.0, 8.0, 1.0), [255, 0, 0]), (Vector3::new(50.0, 5.0, 1.0), [0, 0, 255])];
-        draw_inset(&mut frame, None, &pose(5.0, 5.0, 90.0), &people, LAYOUT);
+        let robot = Some((Vector3::new(5.0, 1.0, 0.5), COLOUR_ROBOT));
+        draw_inset(&mut frame, None, &pose(5.0, 5.0, 90.0), &people, robot, LAYOUT);
         let (u, v) = px(&frame, -2.0, 3.0);
         assert_eq!(frame.pixel(u, v), Some([255, 0, 0]));
+        // The robot 4 m behind.
+        let (u, v) = px(&frame, 0.0, -4.0);
+        assert_eq!(frame.pixel(u, v), Some(COLOUR_ROBOT));
         assert!(!frame.rgb.chunks_exact(3).any(|p| p == [0, 0, 255]));
         // The responder's arrow at the centre.
         let (u, v) = px(&frame, 0.0, 0.0);
         assert_eq!(frame.pixel(u, v), Some(COLOUR_RESPONDER));
         // Off: nothing drawn.
         let mut off = ArFrame::filled(640, 480, [10, 10, 14]);
-        draw_inset(&mut off, None, &pose(5.0, 5.0, 0.0), &people, InsetLayout { side_px: 0, range_m: 8.0 });
+        draw_inset(&mut off, None, &pose(5.0, 5.0, 0.0), &people, robot, InsetLayout { side_px: 0, range_m: 8.0 });
         assert!(off.rgb.chunks_exact(3).all(|p| p == [10, 10, 14]));
     }
 

@@ -90,7 +90,8 @@ pub fn render_view(
             })
             .collect();
         let layout = ar::inset::InsetLayout { side_px: cfg.inset_px, range_m: cfg.inset_range_m };
-        ar::inset::draw_inset(&mut frame, rig.map_raster(), &world_t_rig, &dots, layout);
+        let robot = rig.robot_position().map(|p| (p, ar::inset::COLOUR_ROBOT));
+        ar::inset::draw_inset(&mut frame, rig.map_raster(), &world_t_rig, &dots, robot, layout);
     }
     View { frame, aligned, world_t_camera, people, detection_age_ms }
 }

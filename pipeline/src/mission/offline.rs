@@ -59,6 +59,7 @@ impl OfflineMission {
         for step in self.robot_steps.drain(..) {
             let o = &step.output;
             self.robot_last_ns = Some(o.end_ns);
+            self.rig.push_robot_pose(&o.lidar_pose);
             events.push(MissionEvent::RobotPose {
                 end_ns: o.end_ns,
                 pose: o.lidar_pose,

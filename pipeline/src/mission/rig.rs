@@ -387,6 +387,8 @@ pub struct RigCore {
     view: ViewCloud,
     /// The robot's map from above, for the view's inset.
     map_raster: Option<Arc<MapRaster>>,
+    /// Where the robot's LiDAR is in its world, as it last said (for the view's inset).
+    robot_position: Option<Vector3<f64>>,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -426,6 +428,7 @@ impl RigCore {
             history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
             view: ViewCloud::new(cfg.view_voxel_m, cfg.view_keep_ns),
             map_raster: None,
+            robot_position: None,
             cfg,
         })
     }
@@ -471,6 +474,19 @@ impl RigCore {
         self.map_raw_len = points.len();
         self.map_raster = MapRaster::from_points(&points, INSET_CELL_M).map(Arc::new);
         self.map = Arc::new(points);
+    }
+
+    /// The robot's newest pose (its LiDAR in its world), for the view's inset; a non-finite one
+    /// is ignored.
+    pub fn set_robot_pose(&mut self, world_t_lidar: &Isometry3<f64>) {
+        let p = world_t_lidar.translation.vector;
+        if p.iter().all(|v| v.is_finite()) {
+            self.robot_position = Some(p);
+        }
+    }
+
+    pub fn robot_position(&self) -> Option<Vector3<f64>> {
+        self.robot_position
     }
 
     /// The robot's map from above (for the view's inset), as of the last [`Self::set_map`].

@@ -144,6 +144,11 @@ impl RigSide {
         DetectionTake::Held
     }
 
+    /// The robot's newest pose (its LiDAR in its world), for the view's inset.
+    pub fn push_robot_pose(&mut self, world_t_lidar: &Isometry3<f64>) {
+        self.core.set_robot_pose(world_t_lidar);
+    }
+
     /// Detections refused so far.
     pub fn refused(&self) -> RefusedDetections {
         self.refused
