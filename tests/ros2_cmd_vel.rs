@@ -123,7 +123,7 @@ async fn cmd_vel_moves_the_base_within_its_limits_and_silence_stops_it() {
     assert!(peak > 0.8 * WHEEL1_RPM_AT_LIMIT, "peak {peak:.0} rpm");
     assert!(peak < 1.05 * WHEEL1_RPM_AT_LIMIT, "peak {peak:.0} rpm past the limit's {WHEEL1_RPM_AT_LIMIT:.0}");
     // Silence: the bridge stops the base 100 ms after the last /cmd_vel (its watchdog would at
-    // 200 ms), so the wheel is slowing within 200 ms, and at rest once the ramp down at 8 m/s^2
+    // 200 ms), so the wheel is slowing soon after, and at rest once the ramp down at 8 m/s^2
     // (125 ms from 1 m/s) and the drive's own lag have passed.
     let after = |ms: u64| trace.iter().filter(move |(t, _)| *t >= last_ns + ms * 1_000_000).map(|(_, v)| v.abs());
     let slowing_ms = trace
@@ -134,8 +134,10 @@ async fn cmd_vel_moves_the_base_within_its_limits_and_silence_stops_it() {
     let rest_ms =
         trace.iter().find(|(t, v)| *t > last_ns && v.abs() <= 5.0).map(|(t, _)| (t - last_ns) as f64 * 1e-6).unwrap();
     println!("peak {peak:.0} rpm (limit {WHEEL1_RPM_AT_LIMIT:.0}); slowing {slowing_ms:.0} ms, at rest {rest_ms:.0} ms after the last /cmd_vel");
-    assert!(slowing_ms <= 200.0, "slowing only {slowing_ms:.0} ms after the last /cmd_vel");
-    assert!(rest_ms <= 450.0, "at rest only {rest_ms:.0} ms after the last /cmd_vel");
+    // Bounds with room for a loaded CI machine (measured on an idle one: 152-159 and 360-365 ms,
+    // docs/ros2.md); the base's own watchdog brakes at 200 ms whatever the bridge does.
+    assert!(slowing_ms <= 250.0, "slowing only {slowing_ms:.0} ms after the last /cmd_vel");
+    assert!(rest_ms <= 600.0, "at rest only {rest_ms:.0} ms after the last /cmd_vel");
     assert!(after(600).all(|v| v <= 5.0), "turning again after the stop");
 }
 
