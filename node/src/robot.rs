@@ -236,12 +236,18 @@ pub async fn run(
         }
     }
     summary.ros2 = ros2.take().map(Ros2Out::finish);
-    // The bridge's end closed /cmd_vel: the base is halted and its bus closed.
-    if let Some(t) = teleop {
-        match t.await {
-            Ok(Err(_)) => {} // logged when it failed
-            Err(e) => tracing::warn!("/cmd_vel task: {e}"),
-            Ok(Ok(())) => {}
+    // The bridge's end closed /cmd_vel: the base is halted and its bus closed. A bridge whose
+    // router never answered still holds /cmd_vel's sender: then the task is dropped, which
+    // stops the base's loop, and its halt frames go out.
+    if let Some(mut t) = teleop {
+        match tokio::time::timeout(TELEOP_WAIT, &mut t).await {
+            Ok(Ok(Err(_))) => {} // logged when it failed
+            Ok(Err(e)) => tracing::warn!("/cmd_vel task: {e}"),
+            Ok(Ok(Ok(()))) => {}
+            Err(_) => {
+                t.abort();
+                tracing::warn!("/cmd_vel still open at the end: the base's task dropped, which halts it");
+            }
         }
     }
     summary.livox = Some(driver.stats());
@@ -254,6 +260,9 @@ pub async fn run(
     tracing::info!(?summary, "robot node down");
     Ok(summary)
 }
+
+/// How long the node waits, when stopping, for /cmd_vel's base task to halt the base.
+const TELEOP_WAIT: Duration = Duration::from_secs(2);
 
 /// How long the node waits, when stopping, for the link to take the last map tiles.
 const TILES_WAIT: Duration = Duration::from_secs(5);
