@@ -58,6 +58,26 @@ fn yes() -> bool {
     true
 }
 
+impl TlsConfig {
+    /// zenoh's TLS settings (key, JSON value) for these files: the certificate and key serve
+    /// both listening and connecting.
+    pub(crate) fn zenoh_settings(&self) -> Vec<(&'static str, String)> {
+        let path = |p: &Path| json(&p.to_string_lossy());
+        let mut out = vec![("transport/link/tls/root_ca_certificate", path(&self.root_ca))];
+        if let (Some(c), Some(k)) = (&self.cert, &self.key) {
+            out.extend([
+                ("transport/link/tls/listen_certificate", path(c)),
+                ("transport/link/tls/listen_private_key", path(k)),
+                ("transport/link/tls/connect_certificate", path(c)),
+                ("transport/link/tls/connect_private_key", path(k)),
+            ]);
+        }
+        out.push(("transport/link/tls/enable_mtls", self.mutual.to_string()));
+        out.push(("transport/link/tls/verify_name_on_connect", self.verify_name.to_string()));
+        out
+    }
+}
+
 /// The link's configuration (`config/link.toml` documents every field).
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -392,16 +412,9 @@ impl LinkConfig {
         // larger than the codec's limit, so a peer cannot make us hold more for one message.
         set("transport/link/rx/max_message_size", (starc_pipeline::link::MAX_MESSAGE_BYTES + (64 << 10)).to_string())?;
         if let Some(t) = &self.tls {
-            let path = |p: &Path| json(&p.to_string_lossy());
-            set("transport/link/tls/root_ca_certificate", path(&t.root_ca))?;
-            if let (Some(c), Some(k)) = (&t.cert, &t.key) {
-                set("transport/link/tls/listen_certificate", path(c))?;
-                set("transport/link/tls/listen_private_key", path(k))?;
-                set("transport/link/tls/connect_certificate", path(c))?;
-                set("transport/link/tls/connect_private_key", path(k))?;
+            for (key, value) in t.zenoh_settings() {
+                set(key, value)?;
             }
-            set("transport/link/tls/enable_mtls", t.mutual.to_string())?;
-            set("transport/link/tls/verify_name_on_connect", t.verify_name.to_string())?;
             // With mutual TLS every transport carries the other end's certificate name, so zenoh
             // itself can tie keys to roles (acl::zenoh_access_control): a stolen rig key then
             // cannot put robot messages, nor have them routed on to another rig. Without

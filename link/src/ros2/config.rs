@@ -204,15 +204,9 @@ impl Ros2Config {
         // data and 5 ms of patience; past that a sample is dropped, never waited for.
         set("transport/link/tx/queue/size/data", "8".into())?;
         set("transport/link/tx/queue/congestion_control/drop/wait_before_drop", "5000".into())?;
-        if let Some(t) = &self.tls {
-            let path = |p: &Path| json(&p.to_string_lossy());
-            set("transport/link/tls/root_ca_certificate", path(&t.root_ca))?;
-            if let (Some(c), Some(k)) = (&t.cert, &t.key) {
-                set("transport/link/tls/connect_certificate", path(c))?;
-                set("transport/link/tls/connect_private_key", path(k))?;
-            }
-            set("transport/link/tls/enable_mtls", t.mutual.to_string())?;
-            set("transport/link/tls/verify_name_on_connect", t.verify_name.to_string())?;
+        // The link's TLS settings (the listening ones unused: the bridge listens on nothing).
+        for (key, value) in self.tls.iter().flat_map(TlsConfig::zenoh_settings) {
+            set(key, value)?;
         }
         if self.cmd_vel {
             set("access_control", cmd_vel_access_control(cmd_vel_key, &self.cmd_vel_from))?;

@@ -2,8 +2,11 @@
 //! (walls at the responder's height), heading-up, with the responder at the centre and each
 //! person as a dot, so the way to them shows at a glance.
 
-use super::ArFrame;
+use super::labels::anchor;
+use super::render::person_colour;
+use super::{ArFrame, ArPerson, RenderConfig};
 use nalgebra::{Isometry3, Vector3};
+use std::sync::Arc;
 
 /// Heights a cell records: 16 slices of 0.25 m from the map's lowest point (4 m).
 const SLICES: usize = 16;
@@ -83,6 +86,53 @@ impl MapRaster {
     /// Whether the map holds a point in the cell at (x, y) within the band mask.
     fn occupied(&self, x: f64, y: f64, band: u16) -> bool {
         self.index(x, y).and_then(|i| self.slices.get(i)).is_some_and(|s| s & band != 0)
+    }
+}
+
+/// Cell of the map's top-down raster.
+const INSET_CELL_M: f64 = 0.1;
+
+/// What the inset draws besides the responder and the people: the robot's map, rasterised
+/// when it changes and only while an inset is drawn, and the robot's newest position.
+#[derive(Default)]
+pub struct MapInset {
+    raster: Option<MapRaster>,
+    /// The map the raster was made of (compared by pointer: the rig core hands over a new one
+    /// whenever the robot's map changed).
+    raster_of: Option<Arc<Vec<Vector3<f64>>>>,
+    robot: Option<Vector3<f64>>,
+}
+
+impl MapInset {
+    /// The robot's newest pose (its LiDAR in its world); a non-finite one is ignored.
+    pub fn set_robot_pose(&mut self, world_t_lidar: &Isometry3<f64>) {
+        let p = world_t_lidar.translation.vector;
+        if p.iter().all(|v| v.is_finite()) {
+            self.robot = Some(p);
+        }
+    }
+
+    /// Draws the inset (`cfg.inset_px`; 0: nothing) for a responder at `world_t_rig`, with the
+    /// robot's `map` (world frame) and `people`.
+    pub fn draw(
+        &mut self,
+        frame: &mut ArFrame,
+        map: &Arc<Vec<Vector3<f64>>>,
+        world_t_rig: &Isometry3<f64>,
+        people: &[ArPerson],
+        cfg: &RenderConfig,
+    ) {
+        if cfg.inset_px == 0 {
+            return;
+        }
+        if !self.raster_of.as_ref().is_some_and(|m| Arc::ptr_eq(m, map)) {
+            self.raster = MapRaster::from_points(map, INSET_CELL_M);
+            self.raster_of = Some(Arc::clone(map));
+        }
+        let dots: Vec<_> = people.iter().filter_map(|p| anchor(p).map(|a| (a, person_colour(p, cfg)))).collect();
+        let layout = InsetLayout { side_px: cfg.inset_px, range_m: cfg.inset_range_m };
+        let robot = self.robot.map(|p| (p, COLOUR_ROBOT));
+        draw_inset(frame, self.raster.as_ref(), world_t_rig, &dots, robot, layout);
     }
 }
 

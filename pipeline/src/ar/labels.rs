@@ -3,7 +3,8 @@
 //! distance, for each person outside it (behind the responder, or off to a side).
 
 use super::font::{draw_text, ADVANCE, GLYPH_H};
-use super::{ArFrame, ArPerson, CameraModel, NEAR_M};
+use super::render::person_colour;
+use super::{ArFrame, ArPerson, CameraModel, RenderConfig, NEAR_M};
 use nalgebra::{Isometry3, Point3, Vector3};
 
 /// Labels: light text on a dark plate, readable over the rig's points and the red overlay.
@@ -41,15 +42,15 @@ pub fn label_text(distance_m: f64, age_ns: u64, stale_ns: f64) -> String {
     }
 }
 
-/// Each person's label (in view) or edge arrow (out of view), in `colour(person)` for arrows.
+/// Each person's label (in view) or edge arrow (out of view, in the person's colour).
 pub fn draw_people_labels(
     frame: &mut ArFrame,
     camera: &CameraModel,
     world_t_camera: &Isometry3<f64>,
     people: &[ArPerson],
-    stale_ns: f64,
-    colour: impl Fn(&ArPerson) -> [u8; 3],
+    cfg: &RenderConfig,
 ) {
+    let stale_ns = cfg.stale_after_ms * 1e6;
     let camera_t_world = world_t_camera.inverse();
     let scale = super::render::status_scale(frame.width);
     for p in people {
@@ -66,7 +67,7 @@ pub fn draw_people_labels(
             }
             None => {
                 let (tip, dir) = edge_point(frame, camera, &c);
-                draw_arrow(frame, tip, dir, colour(p));
+                draw_arrow(frame, tip, dir, person_colour(p, cfg));
                 // The distance just inside the arrow's base, clear of it.
                 let (w, h) = text_size(&text, scale);
                 let centre =

@@ -54,8 +54,7 @@ pub fn render(
     let camera_t_world = world_t_camera.inverse();
     draw_rig_points(&mut frame, camera, &camera_t_world, rig_points_world, cfg);
     if status.aligned {
-        let stale_ns = cfg.stale_after_ms * 1e6;
-        let colour = |p: &ArPerson| if p.age_ns as f64 > stale_ns { COLOUR_PERSON_STALE } else { COLOUR_PERSON };
+        let colour = |p: &ArPerson| person_colour(p, cfg);
         if cfg.draw_boxes {
             for p in people {
                 if let Some(b) = &p.bbox {
@@ -64,7 +63,7 @@ pub fn render(
             }
         }
         if cfg.label_people {
-            super::labels::draw_people_labels(&mut frame, camera, world_t_camera, people, stale_ns, colour);
+            super::labels::draw_people_labels(&mut frame, camera, world_t_camera, people, cfg);
         }
         let mut projected = Vec::with_capacity(people.iter().map(|p| p.points_world.len()).sum());
         project_people(camera, world_t_camera, people, &mut projected);
@@ -80,6 +79,15 @@ pub fn render(
     }
     draw_status(&mut frame, status, cfg);
     frame
+}
+
+/// A person's colour: red, dimmed once their detection is older than `stale_after_ms`.
+pub fn person_colour(p: &ArPerson, cfg: &RenderConfig) -> [u8; 3] {
+    if p.age_ns as f64 > cfg.stale_after_ms * 1e6 {
+        COLOUR_PERSON_STALE
+    } else {
+        COLOUR_PERSON
+    }
 }
 
 /// The rig's own points, one pixel each, nearest wins, shaded by depth.

@@ -14,13 +14,13 @@ mod offline;
 mod overlay;
 mod person_motion;
 mod place;
+pub mod recent_voxels;
 mod rig;
 mod rig_history;
 mod rig_side;
 mod robot;
 mod robot_map;
 mod sent_people;
-pub mod view_cloud;
 mod waiting;
 
 pub use input::{MissionInput, Side};
@@ -79,19 +79,6 @@ pub fn render_view(
         link: link.to_string(),
         text: if aligned { String::new() } else { rig.waiting().to_string() },
     };
-    let mut frame = ar::render(camera, &world_t_camera, &rig_points, &people, &status, cfg);
-    if let (Some(world_t_rig), true) = (rig_pose, cfg.inset_px > 0) {
-        let stale_ns = cfg.stale_after_ms * 1e6;
-        let dots: Vec<_> = people
-            .iter()
-            .filter_map(|p| {
-                let colour = if p.age_ns as f64 > stale_ns { ar::COLOUR_PERSON_STALE } else { ar::COLOUR_PERSON };
-                ar::labels::anchor(p).map(|a| (a, colour))
-            })
-            .collect();
-        let layout = ar::inset::InsetLayout { side_px: cfg.inset_px, range_m: cfg.inset_range_m };
-        let robot = rig.robot_position().map(|p| (p, ar::inset::COLOUR_ROBOT));
-        ar::inset::draw_inset(&mut frame, rig.map_raster(), &world_t_rig, &dots, robot, layout);
-    }
+    let frame = ar::render(camera, &world_t_camera, &rig_points, &people, &status, cfg);
     View { frame, aligned, world_t_camera, people, detection_age_ms }
 }

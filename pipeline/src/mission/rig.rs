@@ -7,14 +7,13 @@
 //! [`RigCore::apply`].
 
 use super::place::{ScanPlacer, ScanPoses};
+use super::recent_voxels::RecentVoxels;
 use super::rig_history::{with_history, RigHistory};
-use super::view_cloud::ViewCloud;
 use super::waiting::Waiting;
 use crate::align::{
     filter_window, AggregateStats, AlignConfig, AlignFailure, AlignReport, Aligner, Coverage, ExclusionBox,
     PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
 };
-use crate::ar::inset::MapRaster;
 use crate::ar::OrientedBox;
 use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
@@ -81,9 +80,6 @@ pub struct RigCoreConfig {
     pub view_keep_ns: u64,
     pub view_voxel_m: f64,
 }
-
-/// Cell of the map's top-down raster for the view's inset.
-const INSET_CELL_M: f64 = 0.1;
 
 impl Default for RigCoreConfig {
     fn default() -> Self {
@@ -361,7 +357,6 @@ pub struct RigCore {
     world: WorldPose,
     odom: PoseBuffer,
     scans: VecDeque<Arc<LioScan>>,
-    points: Vec<Vector3<f64>>,
     first_ns: Option<u64>,
     /// The odometry's pose at `first_ns`: where the rig started, in its own frame.
     first_pose: Isometry3<f64>,
@@ -384,11 +379,7 @@ pub struct RigCore {
     /// What the first searches' windows held (see `RigCoreConfig::first_history_ns`).
     history: RigHistory,
     /// What the view draws of the rig's surroundings.
-    view: ViewCloud,
-    /// The robot's map from above, for the view's inset.
-    map_raster: Option<Arc<MapRaster>>,
-    /// Where the robot's LiDAR is in its world, as it last said (for the view's inset).
-    robot_position: Option<Vector3<f64>>,
+    view: RecentVoxels,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -410,7 +401,6 @@ impl RigCore {
             outs: Vec::new(),
             odom: PoseBuffer::new(100_000),
             scans: VecDeque::new(),
-            points: Vec::new(),
             first_ns: None,
             first_pose: Isometry3::identity(),
             next_align_ns: 0,
@@ -426,9 +416,7 @@ impl RigCore {
             waiting_for: None,
             candidate: None,
             history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
-            view: ViewCloud::new(cfg.view_voxel_m, cfg.view_keep_ns),
-            map_raster: None,
-            robot_position: None,
+            view: RecentVoxels::new(cfg.view_voxel_m, cfg.view_keep_ns),
             cfg,
         })
     }
@@ -472,26 +460,12 @@ impl RigCore {
     /// previous one.
     pub fn set_map(&mut self, points: Vec<Vector3<f64>>) {
         self.map_raw_len = points.len();
-        self.map_raster = MapRaster::from_points(&points, INSET_CELL_M).map(Arc::new);
         self.map = Arc::new(points);
     }
 
-    /// The robot's newest pose (its LiDAR in its world), for the view's inset; a non-finite one
-    /// is ignored.
-    pub fn set_robot_pose(&mut self, world_t_lidar: &Isometry3<f64>) {
-        let p = world_t_lidar.translation.vector;
-        if p.iter().all(|v| v.is_finite()) {
-            self.robot_position = Some(p);
-        }
-    }
-
-    pub fn robot_position(&self) -> Option<Vector3<f64>> {
-        self.robot_position
-    }
-
-    /// The robot's map from above (for the view's inset), as of the last [`Self::set_map`].
-    pub fn map_raster(&self) -> Option<&MapRaster> {
-        self.map_raster.as_deref()
+    /// The robot's map as of the last [`Self::set_map`] (a new `Arc` each time).
+    pub fn map(&self) -> &Arc<Vec<Vector3<f64>>> {
+        &self.map
     }
 
     pub fn map_len(&self) -> usize {
@@ -520,8 +494,8 @@ impl RigCore {
     fn drain(&mut self, out: &mut Vec<ScanOutput>) {
         for o in std::mem::take(&mut self.outs) {
             let placed = self.placer.place(&o);
-            self.points = placed.iter().map(|p| p.xyz()).collect();
-            self.view.add(&self.points, o.end_ns);
+            let points: Vec<Vector3<f64>> = placed.iter().map(|p| p.xyz()).collect();
+            self.view.add(&points, o.end_ns);
             let _ = self.world.push_odometry(o.end_ns, o.lidar_pose);
             let _ = self.odom.push(o.end_ns, o.lidar_pose);
             if self.first_ns.is_none() {
@@ -533,11 +507,6 @@ impl RigCore {
             }
             out.push(o);
         }
-    }
-
-    /// The newest scan's points, in the rig's odometry frame.
-    pub fn scan_points(&self) -> &[Vector3<f64>] {
-        &self.points
     }
 
     /// The rig's points of the last `view_keep_ns`, one per voxel, in its odometry frame: what

@@ -3,22 +3,21 @@
 //! building's mirror perfectly; the rooms the responder walked through before rarely fit there
 //! too. Keeping them as voxels costs a few MB where keeping their scans would cost hundreds.
 
-use crate::voxel_hash::{key_of, KeyMap};
+use super::recent_voxels::RecentVoxels;
 use nalgebra::{Isometry3, Point3, Vector3};
 use std::sync::Arc;
 
-/// One point per voxel of the earlier windows (the newest seen there), with when it was seen.
+/// One point per voxel of the earlier windows (the newest seen there), kept for a span.
 pub struct RigHistory {
-    inv_voxel_m: f64,
-    /// How long a voxel not seen again is kept (0: no history).
+    /// 0: no history.
     keep_ns: u64,
-    voxels: KeyMap<(Vector3<f64>, u64)>,
+    voxels: RecentVoxels,
     points: Arc<Vec<Vector3<f64>>>,
 }
 
 impl RigHistory {
     pub fn new(voxel_m: f64, keep_ns: u64) -> Self {
-        Self { inv_voxel_m: 1.0 / voxel_m.max(1e-3), keep_ns, voxels: KeyMap::default(), points: Arc::new(Vec::new()) }
+        Self { keep_ns, voxels: RecentVoxels::new(voxel_m, keep_ns), points: Arc::new(Vec::new()) }
     }
 
     /// Adds a window's points (odometry frame) seen up to `end_ns`, and forgets voxels last seen
@@ -27,15 +26,9 @@ impl RigHistory {
         if self.keep_ns == 0 {
             return;
         }
-        for p in window_odom.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
-            self.voxels.insert(key_of(p, self.inv_voxel_m), (*p, end_ns));
-        }
-        let from_ns = end_ns.saturating_sub(self.keep_ns);
-        self.voxels.retain(|_, (_, seen_ns)| *seen_ns >= from_ns);
-        let mut cells: Vec<_> = self.voxels.iter().map(|(k, (p, _))| (*k, *p)).collect();
+        self.voxels.add(window_odom, end_ns);
         // Sorted by key, so that a search's input does not depend on the map's iteration order.
-        cells.sort_unstable_by_key(|c| c.0);
-        self.points = Arc::new(cells.into_iter().map(|c| c.1).collect());
+        self.points = Arc::new(self.voxels.sorted_points());
     }
 
     /// The kept points, in the rig's odometry frame.

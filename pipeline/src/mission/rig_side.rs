@@ -6,6 +6,7 @@
 
 use super::{render_view, AlignJob, AlignOutcome, AlignVerdict, Overlay, RigCore, RigCoreConfig, View};
 use crate::align::TileMap;
+use crate::ar::inset::MapInset;
 use crate::ar::{ArPerson, CameraModel, RenderConfig};
 use crate::lio::{ImuSample, LioScan, ScanOutput};
 use crate::PipelineError;
@@ -60,6 +61,7 @@ pub struct RigSide {
     camera: CameraModel,
     lidar_t_camera: Isometry3<f64>,
     render: RenderConfig,
+    inset: MapInset,
     newest_detection_ns: u64,
     refused: RefusedDetections,
 }
@@ -83,6 +85,7 @@ impl RigSide {
             camera: cfg.camera,
             lidar_t_camera: cfg.lidar_t_camera,
             render: cfg.render,
+            inset: MapInset::default(),
             newest_detection_ns: 0,
             refused: RefusedDetections::default(),
         })
@@ -146,7 +149,7 @@ impl RigSide {
 
     /// The robot's newest pose (its LiDAR in its world), for the view's inset.
     pub fn push_robot_pose(&mut self, world_t_lidar: &Isometry3<f64>) {
-        self.core.set_robot_pose(world_t_lidar);
+        self.inset.set_robot_pose(world_t_lidar);
     }
 
     /// Detections refused so far.
@@ -192,7 +195,13 @@ impl RigSide {
         if next_frame {
             self.core.world_mut().step_frame();
         }
-        render_view(&self.camera, &self.lidar_t_camera, &self.core, &self.overlay, t_ns, link, &self.render)
+        let mut view =
+            render_view(&self.camera, &self.lidar_t_camera, &self.core, &self.overlay, t_ns, link, &self.render);
+        if view.aligned {
+            let world_t_rig = view.world_t_camera * self.lidar_t_camera.inverse();
+            self.inset.draw(&mut view.frame, self.core.map(), &world_t_rig, &view.people, &self.render);
+        }
+        view
     }
 
     pub fn core(&self) -> &RigCore {

@@ -4,7 +4,7 @@
 
 use super::msgs::{
     check_cloud, ColorRgba, CompressedImage, Header, Imu, Marker, MarkerArray, Odometry, PointCloud2, Pose, Quaternion,
-    TfMessage, Time, TransformStamped, Vector3,
+    RosMessage, TfMessage, Time, TransformStamped, Vector3,
 };
 use super::vision::{BoundingBox3D, Detection3D, Detection3DArray, ObjectHypothesisWithPose};
 use super::writer::{cloud_to_msg, Frames, PersonBox};
@@ -163,7 +163,7 @@ impl MessageBuilder {
 
     /// A rendered frame, PNG-encoded, in the viewer's frame.
     pub fn png_image(&self, stamp: Stamp, png: &[u8]) -> Result<CompressedImage, PipelineError> {
-        super::cdr::check_len("sensor_msgs/msg/CompressedImage", "data", png.len())?;
+        super::cdr::check_len(CompressedImage::TYPE_NAME, "data", png.len())?;
         Ok(CompressedImage { header: self.header(stamp, &self.frames.fpv)?, format: "png".into(), data: png.to_vec() })
     }
 }

@@ -126,6 +126,8 @@ pub struct Recorder {
     held_messages: u64,
     sync_file: Option<File>,
     options: RecorderOptions,
+    /// The messages' builder: `options`' clock and frames.
+    build: MessageBuilder,
     channels: BTreeMap<String, u16>,
     sequences: BTreeMap<u16, u32>,
     open: Option<OpenChunk>,
@@ -166,6 +168,7 @@ impl Recorder {
             sink,
             held_messages: 0,
             sync_file,
+            build: MessageBuilder::new(options.clock, options.frames.clone()),
             options,
             channels: BTreeMap::new(),
             sequences: BTreeMap::new(),
@@ -201,8 +204,8 @@ impl Recorder {
     }
 
     /// The messages' builder: this recording's clock and frames.
-    pub fn builder(&self) -> MessageBuilder {
-        MessageBuilder::new(self.options.clock, self.options.frames.clone())
+    pub fn builder(&self) -> &MessageBuilder {
+        &self.build
     }
 
     fn header(&self, stamp: Stamp, frame_id: &str) -> Result<Header, PipelineError> {

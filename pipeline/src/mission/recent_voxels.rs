@@ -1,19 +1,20 @@
-//! What the responder's view draws of their surroundings: the rig's placed points of the last
-//! few seconds, one (the newest) per voxel, in its odometry frame. One Avia scan is a rosette of
-//! dots in which no one recognises a room; a few seconds of them, thinned to a voxel each, show
-//! the walls, the door and the furniture, at a bounded cost (one point per voxel, not per return).
+//! The rig's points of a recent span, one (the newest) per voxel, in its odometry frame: what
+//! the responder's view draws of their surroundings (one Avia scan is a rosette of dots in which
+//! no one recognises a room; a few seconds of them show the walls, the door and the furniture),
+//! and what the first searches remember ([`super::rig_history`]). One point per voxel, not per
+//! return, bounds the cost.
 
 use crate::voxel_hash::{key_of, KeyMap};
 use nalgebra::Vector3;
 
-pub struct ViewCloud {
+pub struct RecentVoxels {
     inv_voxel_m: f64,
     /// How long a voxel not seen again is kept (0: only the newest scan).
     keep_ns: u64,
     voxels: KeyMap<(Vector3<f64>, u64)>,
 }
 
-impl ViewCloud {
+impl RecentVoxels {
     pub fn new(voxel_m: f64, keep_ns: u64) -> Self {
         Self { inv_voxel_m: 1.0 / voxel_m.max(1e-3), keep_ns, voxels: KeyMap::default() }
     }
@@ -33,6 +34,14 @@ impl ViewCloud {
         self.voxels.values().map(|(p, _)| p)
     }
 
+    /// The kept points, sorted by their voxels' keys (an order that does not depend on the
+    /// map's).
+    pub fn sorted_points(&self) -> Vec<Vector3<f64>> {
+        let mut cells: Vec<_> = self.voxels.iter().map(|(k, (p, _))| (*k, *p)).collect();
+        cells.sort_unstable_by_key(|c| c.0);
+        cells.into_iter().map(|c| c.1).collect()
+    }
+
     pub fn len(&self) -> usize {
         self.voxels.len()
     }
@@ -44,14 +53,14 @@ impl ViewCloud {
 
 #[cfg(test)]
 mod tests {
-    use super::ViewCloud;
+    use super::RecentVoxels;
     use nalgebra::Vector3;
 
     const S: u64 = 1_000_000_000;
 
     #[test]
     fn one_point_per_voxel_for_the_kept_span() {
-        let mut v = ViewCloud::new(0.1, 3 * S);
+        let mut v = RecentVoxels::new(0.1, 3 * S);
         let wall = |x: f64| (0..100).map(move |i| Vector3::new(x, f64::from(i) * 0.01, 1.0)).collect::<Vec<_>>();
         v.add(&wall(0.0), S);
         // 100 points 1 cm apart: 10 voxels of 10 cm.
