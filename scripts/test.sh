@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Every test, on a fresh machine: installs the peers the tests run against (iproute2, linuxptp,
-# socat and libusb from apt where missing; the Python peers into .venv), then runs
+# socat, libusb and chromium from apt where missing; the Python peers into .venv), then runs
 # `cargo test --workspace`. Arguments go to cargo test (e.g. `scripts/test.sh -p starc-livox`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,6 +12,8 @@ command -v socat >/dev/null || need+=(socat)
 python3 -c 'import venv' 2>/dev/null || need+=(python3-venv)
 # Open3D's wheel links libusb-1.0 (the alignment peers).
 ldconfig -p | grep -c 'libusb-1.0.so.0' >/dev/null || need+=(libusb-1.0-0)
+# The browser view's screenshot test (view/tests/view_chromium.rs).
+command -v chromium >/dev/null || need+=(chromium)
 if [ ${#need[@]} -gt 0 ]; then
   echo "installing: ${need[*]}"
   sudo_=()

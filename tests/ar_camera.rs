@@ -87,8 +87,10 @@ fn projected_person_points_land_in_the_simulated_mask() {
 
     // The robot sees the people from the side, 3 m to their left and lower down.
     let robot = Vector3::new(4.5, 3.0, 0.5);
-    let people: Vec<ArPerson> =
-        bodies.iter().map(|b| ArPerson { points_world: surface_points(b, robot), bbox: None, age_ns: 0 }).collect();
+    let people: Vec<ArPerson> = bodies
+        .iter()
+        .map(|b| ArPerson { points_world: surface_points(b, robot), bbox: None, age_ns: 0, pose: None })
+        .collect();
     let (w, h) = (masks.width as usize, masks.height as usize);
     let ratio = |pose: &Isometry3<f64>, label: u8, person: usize, grow_px: usize| {
         let mut projected = Vec::new();

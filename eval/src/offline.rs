@@ -10,8 +10,8 @@ use starc_hil::tum::tum_line;
 use starc_pipeline::align::AlignConfig;
 use starc_pipeline::ar::{CameraModel, RenderConfig};
 use starc_pipeline::mission::{
-    AlignVerdict, MissionEvent, MissionInput, OfflineMission, RigCoreConfig, RigSide, RigSideConfig, RobotCore,
-    RobotCoreConfig, Side, HOLD_NS,
+    AlignVerdict, FrameTime, MissionEvent, MissionInput, OfflineMission, RigCoreConfig, RigSide, RigSideConfig,
+    RobotCore, RobotCoreConfig, Side, HOLD_NS,
 };
 use starc_pipeline::timing::{peak_rss_mib, Stopwatch};
 use std::path::{Path, PathBuf};
@@ -267,7 +267,7 @@ impl Run {
         while let Some(f) = sc.truth.frames.get(self.next_frame).filter(|f| f.t_ns <= horizon).cloned() {
             self.next_frame += 1;
             let t0 = self.cfg.wall_timing.then(Instant::now);
-            let view = self.mission.rig_mut().render(f.t_ns, "offline", true);
+            let view = self.mission.rig_mut().render(FrameTime::at(f.t_ns), "offline", true);
             let render_ms = t0.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
             self.viz_ms.push(render_ms);
             self.frames += 1;
@@ -281,7 +281,7 @@ impl Run {
     fn replay_frame(&mut self) -> Result<()> {
         let Some((t_ns, _)) = self.mission.rig().core().last() else { return Ok(()) };
         let t0 = self.cfg.wall_timing.then(Instant::now);
-        let view = self.mission.rig_mut().render(t_ns, "replay", true);
+        let view = self.mission.rig_mut().render(FrameTime::at(t_ns), "replay", true);
         self.viz_ms.push(t0.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3));
         if self.cfg.frames_every > 0 && self.frames.is_multiple_of(self.cfg.frames_every as usize) {
             let path = self.cfg.out.join("ar").join(format!("{:06}.png", self.frames));

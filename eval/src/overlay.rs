@@ -122,25 +122,41 @@ pub struct OverlayTally {
     coverage_pairs: usize,
     shown: usize,
     shown_pairs: usize,
+    /// The same, over the frames the rig drew as aligned only.
+    shown_aligned: usize,
+    shown_pairs_aligned: usize,
 }
 
 impl OverlayTally {
-    /// One person detected lately, in one frame: counted where they are in the see-through mask.
-    pub fn add(&mut self, p: &PersonPixels) {
+    /// One person detected lately, in one frame (`aligned`: the rig drew it as placed in the
+    /// map): counted where they are in the see-through mask.
+    pub fn add(&mut self, p: &PersonPixels, aligned: bool) {
         if p.in_mask == 0 {
             return;
         }
         self.coverage_sum += p.near_drawn as f64 / p.in_mask as f64;
         self.coverage_pairs += 1;
         if p.hidden() {
+            let shown = usize::from(p.near_drawn > 0);
             self.shown_pairs += 1;
-            self.shown += usize::from(p.near_drawn > 0);
+            self.shown += shown;
+            if aligned {
+                self.shown_pairs_aligned += 1;
+                self.shown_aligned += shown;
+            }
         }
     }
 
-    /// One camera frame: the points drawn in it (pixels), its masks, and the people (labels)
-    /// the robot detected lately.
-    pub fn frame(&mut self, see_through: &Mask, visible: Option<&Mask>, drawn: &[(f64, f64)], detected: &[u16]) {
+    /// One camera frame: the points drawn in it (pixels), its masks, the people (labels) the
+    /// robot detected lately, and whether the rig drew it aligned.
+    pub fn frame(
+        &mut self,
+        see_through: &Mask,
+        visible: Option<&Mask>,
+        drawn: &[(f64, f64)],
+        detected: &[u16],
+        aligned: bool,
+    ) {
         if detected.is_empty() {
             return;
         }
@@ -148,7 +164,7 @@ impl OverlayTally {
         let pixels = person_pixels(see_through, visible, &near);
         for label in detected {
             if let Some(p) = pixels.get(usize::from(mask_value(*label))) {
-                self.add(p);
+                self.add(p, aligned);
             }
         }
     }
@@ -160,6 +176,8 @@ impl OverlayTally {
             coverage_pairs: self.coverage_pairs,
             people_shown: share(self.shown as f64, self.shown_pairs),
             shown_pairs: self.shown_pairs,
+            people_shown_aligned: share(self.shown_aligned as f64, self.shown_pairs_aligned),
+            shown_pairs_aligned: self.shown_pairs_aligned,
         }
     }
 }
@@ -212,8 +230,26 @@ mod tests {
 
     fn one_frame(see: &Mask, visible: Option<&Mask>, drawn: &[(f64, f64)], detected: &[u16]) -> OverlayReport {
         let mut t = OverlayTally::default();
-        t.frame(see, visible, drawn, detected);
+        t.frame(see, visible, drawn, detected, true);
         t.report()
+    }
+
+    #[test]
+    fn people_shown_while_aligned_counts_only_the_frames_drawn_aligned() {
+        let see = mask(20, 20, 1, |x, y| (5..9).contains(&x) && (5..9).contains(&y));
+        let on = at_centres(&see, 1);
+        let mut t = OverlayTally::default();
+        // Two frames before the rig was placed (nothing drawn), one after (drawn on them).
+        t.frame(&see, None, &[], &[1], false);
+        t.frame(&see, None, &[], &[1], false);
+        t.frame(&see, None, &on, &[1], true);
+        let r = t.report();
+        assert_eq!((r.shown_pairs, r.shown_pairs_aligned), (3, 1));
+        assert!((r.people_shown - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(r.people_shown_aligned, 1.0);
+        // Aligned but drawn elsewhere (a wrong alignment) counts against it.
+        t.frame(&see, None, &[(19.5, 19.5)], &[1], true);
+        assert_eq!(t.report().people_shown_aligned, 0.5);
     }
 
     #[test]

@@ -62,6 +62,11 @@ pub struct OverlayReport {
     /// drawn point lands within 2 px of their mask.
     pub people_shown: f64,
     pub shown_pairs: usize,
+    /// `people_shown` over the frames the rig drew aligned only: what the view leaves undrawn
+    /// once the rig is placed (1.0 when it draws every person detected behind a wall there;
+    /// a wrong alignment draws them elsewhere and counts against it).
+    pub people_shown_aligned: f64,
+    pub shown_pairs_aligned: usize,
 }
 
 #[derive(Debug, Serialize)]

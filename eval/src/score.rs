@@ -47,6 +47,7 @@ struct PendingFrame {
     t_ns: u64,
     /// The person points drawn in it (pixels).
     drawn: Vec<(f64, f64)>,
+    aligned: bool,
 }
 
 /// Everything scored so far.
@@ -336,7 +337,7 @@ impl Scorer {
             render_ms
         ));
         let drawn = self.projected.iter().map(|p| (p.u, p.v)).collect();
-        self.pending.push_back(PendingFrame { index: f.index, t_ns: f.t_ns, drawn });
+        self.pending.push_back(PendingFrame { index: f.index, t_ns: f.t_ns, drawn, aligned: view.aligned });
         self.score_overlays(false)
     }
 
@@ -354,7 +355,7 @@ impl Scorer {
             }
             let Some(see_through) = self.truth.see_through(f.index)? else { continue };
             let visible = self.truth.visible(f.index)?;
-            self.overlay.frame(&see_through, visible.as_ref(), &f.drawn, &detected);
+            self.overlay.frame(&see_through, visible.as_ref(), &f.drawn, &detected, f.aligned);
         }
         Ok(())
     }

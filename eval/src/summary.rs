@@ -21,11 +21,13 @@ pub fn summary(r: &Report) -> String {
     let _ = writeln!(
         o,
         "  overlay (people detected in the last second): person coverage {} over {} (frame, person) pairs; \
-         people behind walls shown {} of {} pairs",
+         people behind walls shown {} of {} pairs ({} of the {} in frames drawn aligned)",
         pct(v.person_coverage),
         v.coverage_pairs,
         pct(v.people_shown),
-        v.shown_pairs
+        v.shown_pairs,
+        pct(v.people_shown_aligned),
+        v.shown_pairs_aligned
     );
     let d = &r.detection;
     let _ = writeln!(

@@ -11,6 +11,7 @@ use nalgebra::Vector3;
 use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkPerson, LinkState, Role};
 use starc_pipeline::align::{encode_tiles, Vec3};
 use starc_pipeline::ar::OrientedBox;
+use starc_pipeline::detect::PersonPose;
 use starc_pipeline::link::encode;
 
 fn free_port() -> u16 {
@@ -37,6 +38,7 @@ fn detections(seq: u32) -> LinkMessage {
                 size_m: Vector3::new(0.5, 0.4, 1.8),
                 yaw_rad: 0.3,
             },
+            pose: Some(PersonPose::Upright),
             points_world: (0..2000).map(|i| [2.0 + (i % 10) as f32 * 0.02, 1.0, (i / 10) as f32 * 0.009]).collect(),
         }],
     }

@@ -18,6 +18,7 @@ use starc_link::certs::make_certs;
 use starc_link::{host_now_ns, LinkConfig, LinkMessage, LinkNode, LinkPerson, LinkState, Role, TlsConfig};
 use starc_pipeline::align::{encode_tiles, TileMap, Vec3};
 use starc_pipeline::ar::OrientedBox;
+use starc_pipeline::detect::PersonPose;
 use starc_pipeline::link::encode;
 use starc_time::{Clock, Stamp};
 use zenoh::qos::CongestionControl;
@@ -85,6 +86,7 @@ fn detections(seq: u32, points: usize) -> LinkMessage {
                 size_m: Vector3::new(0.5, 0.4, 1.8),
                 yaw_rad: 0.0,
             },
+            pose: Some(PersonPose::Upright),
             points_world: (0..points).map(|i| [2.0, 1.0, (i % 1000) as f32 * 0.001]).collect(),
         }],
     }

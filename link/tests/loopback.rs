@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use starc_link::{host_now_ns, LinkMessage, LinkNode, LinkPerson, LinkState, Received, Role};
 use starc_pipeline::align::{encode_tiles, TileMap, Vec3};
 use starc_pipeline::ar::OrientedBox;
+use starc_pipeline::detect::PersonPose;
 use starc_time::{Clock, Stamp};
 
 /// Map tiles of a 12 m x 4 m floor at `version`: three 4 m tiles.
@@ -41,6 +42,7 @@ fn detections(seq: u32) -> LinkMessage {
                 size_m: Vector3::new(0.5, 0.4, 1.8),
                 yaw_rad: 0.3,
             },
+            pose: Some(PersonPose::Upright),
             points_world: (0..2000).map(|i| [2.0 + (i % 10) as f32 * 0.02, 1.0, (i / 10) as f32 * 0.009]).collect(),
         }],
     }

@@ -14,7 +14,8 @@ use nalgebra::Isometry3;
 use starc_link::{host_now_ns, LinkMessage, LinkNode, Received, Role};
 use starc_livox::live::{LivoxDriver, LivoxEvent};
 use starc_pipeline::mission::{
-    people_to_draw, AlignOutcome, AlignVerdict, DetectionTake, RigCoreConfig, RigSide, RigSideConfig, View, HOLD_NS,
+    people_to_draw, AlignOutcome, AlignVerdict, DetectionTake, FrameTime, RigCoreConfig, RigSide, RigSideConfig, View,
+    HOLD_NS,
 };
 use starc_pipeline::record::msgs::{CompressedImage, Header, Time};
 use starc_pipeline::record::Topic;
@@ -26,6 +27,10 @@ use tokio::sync::mpsc;
 
 /// How long a scheduled frame waits for the robot's detection of its instant.
 const SCHEDULED_WAIT: Duration = Duration::from_millis(100);
+/// With no new frame for this long (the rig's LiDAR quiet, no detection), the frame is drawn
+/// again as it stands, so the people's ages, the link state and the status keep up with the
+/// wall clock instead of freezing on screen.
+const REFRESH_AFTER: Duration = Duration::from_millis(250);
 
 /// What the rig node did, for a caller that watches it (the simulated mission).
 pub enum FpvEvent {
@@ -132,16 +137,21 @@ pub async fn run(
         host_minus_lidar_ns: None,
         next_scheduled: 0,
         passed_at: None,
+        drawn_at: None,
         summary: FpvSummary::default(),
         started: false,
     };
     let mut job: Option<Job> = None;
     let mut wait_tick = tokio::time::interval(Duration::from_millis(5));
+    let mut refresh_tick = tokio::time::interval(REFRESH_AFTER);
+    refresh_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let mut render_live = false;
+        let mut refresh = false;
         tokio::select! {
             _ = wait_stop(&mut stop) => break,
             _ = wait_tick.tick(), if node.passed_at.is_some() => {}
+            _ = refresh_tick.tick() => refresh = node.drawn_at.is_some_and(|t| t.elapsed() >= REFRESH_AFTER),
             done = async { match job.as_mut() { Some(j) => j.await, None => std::future::pending().await } } => {
                 job = None;
                 node.aligned(done.unwrap_or_else(|_| Err(PipelineError::BadPose { t_ns: 0, reason: "the alignment thread ended without a result".into() })));
@@ -162,8 +172,8 @@ pub async fn run(
             }
         }
         let Some((last_ns, _)) = node.side.core().last() else { continue };
-        if render_live {
-            node.render_live(last_ns, link_state(&link));
+        if render_live || refresh {
+            node.render_live(last_ns, link_state(&link), !refresh);
         }
         node.render_scheduled(last_ns, link_state(&link));
     }
@@ -226,6 +236,8 @@ struct RigNode {
     host_minus_lidar_ns: Option<i64>,
     next_scheduled: usize,
     passed_at: Option<Instant>,
+    /// When the last live frame was drawn.
+    drawn_at: Option<Instant>,
     summary: FpvSummary,
     started: bool,
 }
@@ -308,6 +320,11 @@ impl RigNode {
         }
     }
 
+    /// Now by this host's clock, on the rig LiDAR's clock (once a scan has tied the two).
+    fn now_on_rig_clock(&self) -> Option<u64> {
+        self.host_minus_lidar_ns.map(|off| host_now_ns().saturating_add_signed(off.saturating_neg()))
+    }
+
     /// A driver event; whether the frame should be drawn again.
     fn on_lidar(&mut self, ev: LivoxEvent) -> bool {
         let mut outs = Vec::new();
@@ -341,10 +358,13 @@ impl RigNode {
         !outs.is_empty()
     }
 
-    /// The live frame at the newest rig scan or detection, to the views and the recording.
-    fn render_live(&mut self, last_ns: u64, link: &'static str) {
+    /// The live frame at the newest rig scan or detection, to the views and the recording;
+    /// `new_data` false for a frame drawn again only to keep its ages and status current.
+    fn render_live(&mut self, last_ns: u64, link: &'static str, new_data: bool) {
         let t_ns = last_ns.max(self.side.newest_detection_ns());
-        let view = self.side.render(t_ns, link, self.schedule.is_empty());
+        let time = FrameTime { scene_ns: t_ns, now_ns: self.now_on_rig_clock().unwrap_or(t_ns).max(t_ns) };
+        let view = self.side.render(time, link, new_data && self.schedule.is_empty());
+        self.drawn_at = Some(Instant::now());
         let rendered = host_now_ns();
         self.summary.frames += 1;
         if view.aligned {
@@ -406,7 +426,7 @@ impl RigNode {
             self.passed_at = None;
             self.next_scheduled += 1;
             let t0 = Instant::now();
-            let view = self.side.render(t_ns, link, true);
+            let view = self.side.render(FrameTime::at(t_ns), link, true);
             let render_ms = t0.elapsed().as_secs_f64() * 1e3;
             self.send(FpvEvent::Frame { index, t_ns, view: Box::new(view), render_ms });
         }

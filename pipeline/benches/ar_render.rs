@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use starc_pipeline::ar::{
     project_people, render, ArPerson, ArStatus, CameraModel, OrientedBox, ProjectedPoint, RenderConfig,
 };
+use starc_pipeline::detect::PersonPose;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -44,23 +45,36 @@ fn rig_points(rng: &mut Rng, n: usize) -> Vec<Vector3<f64>> {
         .collect()
 }
 
-/// People standing behind the wall: points in a 0.5 x 0.4 x 1.75 m box each.
+/// People behind the wall, standing, sitting and lying: points in a box each (length, width,
+/// height).
 fn people(rng: &mut Rng, per_person: usize) -> Vec<ArPerson> {
-    [(6.0, 0.5), (7.5, -1.8), (8.5, 2.0)]
-        .iter()
-        .map(|&(x, y)| {
-            let size = Vector3::new(0.4, 0.5, 1.75);
-            let centre = Vector3::new(x, y, 0.875);
-            let points_world = (0..per_person)
-                .map(|_| centre + Vector3::new(rng.range(-0.2, 0.2), rng.range(-0.25, 0.25), rng.range(-0.875, 0.875)))
-                .collect();
-            ArPerson {
-                points_world,
-                bbox: Some(OrientedBox { centre_m: centre, size_m: size, yaw_rad: 0.3 }),
-                age_ns: 80_000_000,
-            }
-        })
-        .collect()
+    [
+        (6.0, 0.5, [0.4, 0.5, 1.75], PersonPose::Upright),
+        (7.5, -1.8, [0.6, 0.5, 1.2], PersonPose::Low),
+        (8.5, 2.0, [1.75, 0.5, 0.35], PersonPose::Lying),
+    ]
+    .iter()
+    .map(|&(x, y, [l, w, h], pose)| {
+        let size = Vector3::new(l, w, h);
+        let centre = Vector3::new(x, y, h / 2.0);
+        let points_world = (0..per_person)
+            .map(|_| {
+                centre
+                    + Vector3::new(
+                        rng.range(-l / 2.0, l / 2.0),
+                        rng.range(-w / 2.0, w / 2.0),
+                        rng.range(-h / 2.0, h / 2.0),
+                    )
+            })
+            .collect();
+        ArPerson {
+            points_world,
+            bbox: Some(OrientedBox { centre_m: centre, size_m: size, yaw_rad: 0.3 }),
+            age_ns: 80_000_000,
+            pose: Some(pose),
+        }
+    })
+    .collect()
 }
 
 /// The camera at eye height looking along +x, yawed by `yaw_rad`.

@@ -54,6 +54,7 @@ fn frames(n: usize) -> Vec<ArFrame> {
                     .collect(),
                 bbox: Some(OrientedBox { centre_m: centre, size_m: Vector3::new(0.4, 0.5, 1.75), yaw_rad: 0.3 }),
                 age_ns: 80_000_000,
+                pose: None,
             }
         })
         .collect();

@@ -31,6 +31,9 @@ pub struct RenderConfig {
     /// robot's map `inset_range_m` around the responder, heading-up, once aligned.
     pub inset_px: u32,
     pub inset_range_m: f64,
+    /// The inset with the map's +y up and the responder's arrow turning, instead of
+    /// heading-up (the map turning with the responder).
+    pub inset_north_up: bool,
 }
 
 impl Default for RenderConfig {
@@ -45,6 +48,7 @@ impl Default for RenderConfig {
             label_people: true,
             inset_px: 160,
             inset_range_m: 8.0,
+            inset_north_up: false,
         }
     }
 }

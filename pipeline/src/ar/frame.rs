@@ -14,11 +14,7 @@ pub struct ArFrame {
 impl ArFrame {
     /// A frame filled with one colour.
     pub fn filled(width: u32, height: u32, colour: [u8; 3]) -> Self {
-        let pixels = width as usize * height as usize;
-        let mut rgb = Vec::with_capacity(pixels * 3);
-        for _ in 0..pixels {
-            rgb.extend_from_slice(&colour);
-        }
+        let rgb = colour.repeat(width as usize * height as usize);
         Self { width, height, rgb }
     }
 

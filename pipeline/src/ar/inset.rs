@@ -130,7 +130,7 @@ impl MapInset {
             self.raster_of = Some(Arc::clone(map));
         }
         let dots: Vec<_> = people.iter().filter_map(|p| anchor(p).map(|a| (a, person_colour(p, cfg)))).collect();
-        let layout = InsetLayout { side_px: cfg.inset_px, range_m: cfg.inset_range_m };
+        let layout = InsetLayout { side_px: cfg.inset_px, range_m: cfg.inset_range_m, north_up: cfg.inset_north_up };
         let robot = self.robot.map(|p| (p, COLOUR_ROBOT));
         draw_inset(frame, self.raster.as_ref(), world_t_rig, &dots, robot, layout);
     }
@@ -143,12 +143,16 @@ pub struct InsetLayout {
     pub side_px: u32,
     /// From the centre to the inset's edge, metres.
     pub range_m: f64,
+    /// The map's +y up (as Foxglove and RViz show the map), the responder's arrow turning;
+    /// otherwise heading-up, the map turning.
+    pub north_up: bool,
 }
 
 /// Draws the inset in the frame's lower right corner: the map's cells in the responder's
 /// height band (`BAND_BELOW_M` below the rig to `BAND_ABOVE_M` above it, where walls, doors and
-/// furniture are and floors and ceilings are not), turned so that the responder's heading points up; the responder as a green arrow at
-/// the centre; each person within range, and the robot, as a dot of its colour.
+/// furniture are and floors and ceilings are not), heading-up (or the map's +y up with
+/// `north_up`); the responder as a green arrow at the centre pointing where they face; each
+/// person within range, and the robot, as a dot of its colour.
 pub fn draw_inset(
     frame: &mut ArFrame,
     raster: Option<&MapRaster>,
@@ -166,8 +170,10 @@ pub fn draw_inset(
     frame.fill_rect(x0, y0, side, side, COLOUR_INSET_BACKGROUND);
     let here = world_t_rig.translation.vector;
     let forward = world_t_rig.rotation * Vector3::x();
-    let yaw = forward.y.atan2(forward.x);
-    let (s, c) = yaw.sin_cos();
+    let heading = forward.y.atan2(forward.x);
+    // The world direction that points up in the inset.
+    let up_yaw = if layout.north_up { std::f64::consts::FRAC_PI_2 } else { heading };
+    let (s, c) = up_yaw.sin_cos();
     let m_per_px = 2.0 * layout.range_m / f64::from(side);
     let half = f64::from(side) / 2.0;
     // Inset pixel (right, up from the centre, metres) to world: up is the heading, right is
@@ -194,10 +200,15 @@ pub fn draw_inset(
             frame.disc(centre.0 + right / m_per_px, centre.1 - up / m_per_px, 3, *colour);
         }
     }
-    // The responder: a small arrow pointing up.
+    // The responder: a small arrow where they face (straight up when heading-up), in pixels
+    // (right, down).
+    let dir = ((up_yaw - heading).sin(), -(heading - up_yaw).cos());
+    let perp = (-dir.1, dir.0);
+    let tip = (centre.0 + 7.0 * dir.0, centre.1 + 7.0 * dir.1);
     for k in 0..=8 {
-        let f = f64::from(k) / 8.0;
-        frame.line((centre.0, centre.1 - 7.0), (centre.0 - 5.0 + 10.0 * f, centre.1 + 5.0), COLOUR_RESPONDER);
+        let f = f64::from(k) / 8.0 * 2.0 - 1.0;
+        let base = (centre.0 - 5.0 * dir.0 + 5.0 * f * perp.0, centre.1 - 5.0 * dir.1 + 5.0 * f * perp.1);
+        frame.line(tip, base, COLOUR_RESPONDER);
     }
 }
 
@@ -232,7 +243,7 @@ mod tests {
         )
     }
 
-    const LAYOUT: InsetLayout = InsetLayout { side_px: 160, range_m: 8.0 };
+    const LAYOUT: InsetLayout = InsetLayout { side_px: 160, range_m: 8.0, north_up: false };
 
     /// Inset pixel (in the frame) of a point `right`, `up` metres from the centre.
     fn px(frame: &ArFrame, right: f64, up: f64) -> (u32, u32) {
@@ -259,6 +270,28 @@ mod tests {
     }
 
     #[test]
+    fn north_up_keeps_the_map_still_and_turns_the_responders_arrow() {
+        let raster = MapRaster::from_points(&room(), 0.1).unwrap();
+        let north_up = InsetLayout { north_up: true, ..LAYOUT };
+        // At (5, 5) facing +x (east) and facing -y: the wall y = 10 stays 5 m up either way.
+        for (yaw, tip) in [(0.0, (6.0, 0.0)), (-90.0, (0.0, -6.0))] {
+            let mut frame = ArFrame::filled(640, 480, [10, 10, 14]);
+            draw_inset(&mut frame, Some(&raster), &pose(5.0, 5.0, yaw), &[], None, north_up);
+            let (u, v) = px(&frame, 0.0, 5.0);
+            assert!(
+                (v - 2..v + 3).any(|v| frame.pixel(u, v) == Some(COLOUR_INSET_WALL)),
+                "facing {yaw}: y = 10 not up"
+            );
+            // The arrow's tip points where the responder faces (0.6 m = 6 px from the centre),
+            // and nothing of it is on the opposite side.
+            let (u, v) = px(&frame, tip.0 / 10.0, tip.1 / 10.0);
+            assert_eq!(frame.pixel(u, v), Some(COLOUR_RESPONDER), "facing {yaw}: tip");
+            let (u, v) = px(&frame, -tip.0 / 10.0, -tip.1 / 10.0);
+            assert_ne!(frame.pixel(u, v), Some(COLOUR_RESPONDER), "facing {yaw}: tail");
+        }
+    }
+
+    #[test]
     fn people_are_dots_where_they_are_and_out_of_range_ones_are_left_out() {
         let mut frame = ArFrame::filled(640, 480, [10, 10, 14]);
         // Facing +y from (5, 5): a person at (3, 8) is 3 m ahead and 2 m to the left.
@@ -276,7 +309,7 @@ mod tests {
         assert_eq!(frame.pixel(u, v), Some(COLOUR_RESPONDER));
         // Off: nothing drawn.
         let mut off = ArFrame::filled(640, 480, [10, 10, 14]);
-        draw_inset(&mut off, None, &pose(5.0, 5.0, 0.0), &people, robot, InsetLayout { side_px: 0, range_m: 8.0 });
+        draw_inset(&mut off, None, &pose(5.0, 5.0, 0.0), &people, robot, InsetLayout { side_px: 0, ..LAYOUT });
         assert!(off.rgb.chunks_exact(3).all(|p| p == [10, 10, 14]));
     }
 

@@ -1,10 +1,11 @@
-//! Where each person is, at a glance: a label with their distance (and, once their detection is
-//! stale, its age) over each person in view, and an arrow at the frame's edge, with the
+//! Where each person is, at a glance: a label with their distance, posture (and, once their
+//! detection is stale, its age) over each person in view, and an arrow at the frame's edge, with the
 //! distance, for each person outside it (behind the responder, or off to a side).
 
 use super::font::{draw_text, ADVANCE, GLYPH_H};
 use super::render::person_colour;
 use super::{ArFrame, ArPerson, CameraModel, RenderConfig, NEAR_M};
+use crate::detect::PersonPose;
 use nalgebra::{Isometry3, Point3, Vector3};
 
 /// Labels: light text on a dark plate, readable over the rig's points and the red overlay.
@@ -33,12 +34,27 @@ fn top(p: &ArPerson, anchor: &Vector3<f64>) -> Vector3<f64> {
     Vector3::new(anchor.x, anchor.y, z)
 }
 
-/// "4.2 M", and "4.2 M 3.5 S" once the detection is older than `stale_ns`.
-pub fn label_text(distance_m: f64, age_ns: u64, stale_ns: f64) -> String {
+/// "4.2 M", then the posture when it is known ("4.2 M LYING"), then the age once the detection
+/// is older than `stale_ns` ("4.2 M LYING 3.5 S").
+pub fn label_text(distance_m: f64, pose: Option<PersonPose>, age_ns: u64, stale_ns: f64) -> String {
+    let mut text = format!("{distance_m:.1} M");
+    if let Some(pose) = pose {
+        text.push(' ');
+        text.push_str(posture_word(pose));
+    }
     if age_ns as f64 > stale_ns {
-        format!("{distance_m:.1} M {:.1} S", age_ns as f64 * 1e-9)
-    } else {
-        format!("{distance_m:.1} M")
+        text.push_str(&format!(" {:.1} S", age_ns as f64 * 1e-9));
+    }
+    text
+}
+
+/// The posture as the label shows it: one word a responder reads at a glance (`Low` covers
+/// sitting and crouching, which the detector does not tell apart).
+pub fn posture_word(pose: PersonPose) -> &'static str {
+    match pose {
+        PersonPose::Upright => "STANDING",
+        PersonPose::Low => "SITTING",
+        PersonPose::Lying => "LYING",
     }
 }
 
@@ -56,12 +72,15 @@ pub fn draw_people_labels(
     for p in people {
         let Some(a) = anchor(p) else { continue };
         let c = camera_t_world.transform_point(&Point3::from(a)).coords;
-        let text = label_text(c.norm(), p.age_ns, stale_ns);
+        let text = label_text(c.norm(), p.pose, p.age_ns, stale_ns);
         match in_view(camera, &c) {
             Some((u, v)) => {
-                // Over the person's head where that is in view, else over their middle.
+                // Over the person's head where that is in view, else over their middle; and above
+                // their whole box on screen (a lying person seen from above reaches higher in the
+                // image than the top of their box's centre), so the label hides none of them.
                 let head = camera_t_world.transform_point(&Point3::from(top(p, &a))).coords;
                 let (u, v) = in_view(camera, &head).unwrap_or((u, v));
+                let v = box_top_px(camera, &camera_t_world, p).map_or(v, |top| top.min(v));
                 let (_, h) = text_size(&text, scale);
                 plate_text(frame, u, v - h - 6.0, scale, &text);
             }
@@ -76,6 +95,17 @@ pub fn draw_people_labels(
             }
         }
     }
+}
+
+/// The highest row (smallest v) of a person's box on screen, when every corner is in front of
+/// the camera.
+fn box_top_px(camera: &CameraModel, camera_t_world: &Isometry3<f64>, p: &ArPerson) -> Option<f64> {
+    let corners = super::box_corners(p.bbox.as_ref()?);
+    corners.iter().try_fold(f64::INFINITY, |top, c| {
+        let c = camera_t_world.transform_point(&Point3::from(*c)).coords;
+        let (_, v) = if c.z >= NEAR_M { camera.project_unclipped(&c) } else { None }?;
+        Some(top.min(v))
+    })
 }
 
 /// The pixel of a camera-frame point, when it lies in front of the camera and inside the frame.

@@ -31,7 +31,7 @@ pub use camera::{CameraModel, NEAR_M};
 pub use config::RenderConfig;
 pub use frame::ArFrame;
 pub use mask::{mask_inlier_ratio, read_mask_png};
-pub use render::{box_corners, render, BOX_EDGES, COLOUR_PERSON, COLOUR_PERSON_STALE};
+pub use render::{box_corners, render, render_in, BOX_EDGES, COLOUR_PERSON, COLOUR_PERSON_STALE};
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -52,6 +52,9 @@ pub struct ArPerson {
     pub points_world: Vec<Vector3<f64>>,
     pub bbox: Option<OrientedBox>,
     pub age_ns: u64,
+    /// The posture the detector judged, shown in the label (`None`: not known, e.g. from a
+    /// robot whose link format does not carry it).
+    pub pose: Option<crate::detect::PersonPose>,
 }
 
 /// What the status line shows.

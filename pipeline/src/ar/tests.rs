@@ -17,7 +17,12 @@ fn aligned() -> ArStatus {
 }
 
 fn person_at(points: &[[f64; 3]], age_ns: u64) -> ArPerson {
-    ArPerson { points_world: points.iter().map(|p| Vector3::new(p[0], p[1], p[2])).collect(), bbox: None, age_ns }
+    ArPerson {
+        points_world: points.iter().map(|p| Vector3::new(p[0], p[1], p[2])).collect(),
+        bbox: None,
+        age_ns,
+        pose: None,
+    }
 }
 
 fn count(frame: &ArFrame, colour: [u8; 3]) -> usize {
@@ -83,7 +88,7 @@ fn a_person_behind_a_wall_is_drawn_red_on_top() {
 fn box_wireframe_lands_on_the_projected_edges() {
     let cam = CameraModel::default();
     let bbox = OrientedBox { centre_m: Vector3::new(5.0, 0.0, 1.5), size_m: Vector3::new(0.5, 1.0, 1.0), yaw_rad: 0.0 };
-    let people = [ArPerson { points_world: Vec::new(), bbox: Some(bbox), age_ns: 0 }];
+    let people = [ArPerson { points_world: Vec::new(), bbox: Some(bbox), age_ns: 0, pose: None }];
     let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &RenderConfig::default());
     // Front face at 4.75 m: vertical edges at u = 320 +- 460 * 0.5 / 4.75 = 320 +- 48.42.
     assert_eq!(frame.pixel(368, 240), Some(COLOUR_PERSON));
@@ -106,8 +111,8 @@ fn a_box_around_the_camera_is_clipped_without_panicking() {
     let bbox = OrientedBox { centre_m: Vector3::new(0.0, 0.0, 1.5), size_m: Vector3::new(4.0, 4.0, 2.0), yaw_rad: 0.7 };
     let far = OrientedBox { centre_m: Vector3::new(1e9, -1e9, 1.5), size_m: Vector3::new(1.0, 1.0, 1.0), yaw_rad: 0.0 };
     let people = [
-        ArPerson { points_world: vec![], bbox: Some(bbox), age_ns: 0 },
-        ArPerson { points_world: vec![], bbox: Some(far), age_ns: 0 },
+        ArPerson { points_world: vec![], bbox: Some(bbox), age_ns: 0, pose: None },
+        ArPerson { points_world: vec![], bbox: Some(far), age_ns: 0, pose: None },
     ];
     let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &RenderConfig::default());
     // The walls of the box in front of the camera are visible.
@@ -128,7 +133,8 @@ fn stale_people_are_dimmed() {
 fn people_are_not_drawn_when_not_aligned() {
     let cam = CameraModel::default();
     let bbox = OrientedBox { centre_m: Vector3::new(5.0, 0.0, 1.5), size_m: Vector3::new(0.5, 1.0, 1.0), yaw_rad: 0.0 };
-    let people = [ArPerson { points_world: vec![Vector3::new(5.0, 0.0, 1.5)], bbox: Some(bbox), age_ns: 0 }];
+    let people =
+        [ArPerson { points_world: vec![Vector3::new(5.0, 0.0, 1.5)], bbox: Some(bbox), age_ns: 0, pose: None }];
     let rig = [Vector3::new(3.0, 0.2, 1.45)];
     let status = ArStatus { aligned: false, detection_age_ms: None, link: "OK".into(), text: "ICP RMS 0.31 M".into() };
     let frame = render(&cam, &camera_pose(), &rig, &people, &status, &RenderConfig::default());
@@ -269,10 +275,14 @@ fn shipped_config_is_the_default() {
 }
 
 #[test]
-fn label_text_gives_the_distance_and_a_stale_age() {
+fn label_text_gives_the_distance_the_posture_and_a_stale_age() {
     use super::labels::label_text;
-    assert_eq!(label_text(4.96, 100_000_000, 500e6), "5.0 M");
-    assert_eq!(label_text(12.34, 2_100_000_000, 500e6), "12.3 M 2.1 S");
+    use crate::detect::PersonPose;
+    assert_eq!(label_text(4.96, None, 100_000_000, 500e6), "5.0 M");
+    assert_eq!(label_text(12.34, None, 2_100_000_000, 500e6), "12.3 M 2.1 S");
+    assert_eq!(label_text(3.0, Some(PersonPose::Lying), 0, 500e6), "3.0 M LYING");
+    assert_eq!(label_text(3.0, Some(PersonPose::Low), 900_000_000, 500e6), "3.0 M SITTING 0.9 S");
+    assert_eq!(label_text(3.0, Some(PersonPose::Upright), 0, 500e6), "3.0 M STANDING");
 }
 
 /// The label plate's text pixels above a person in view, and none with labels off.
@@ -281,7 +291,7 @@ fn a_person_in_view_is_labelled_with_their_distance() {
     use super::labels::COLOUR_LABEL;
     let cam = CameraModel::default();
     let bbox = OrientedBox { centre_m: Vector3::new(5.0, 0.0, 1.5), size_m: Vector3::new(0.5, 0.5, 1.8), yaw_rad: 0.0 };
-    let people = [ArPerson { points_world: vec![], bbox: Some(bbox), age_ns: 0 }];
+    let people = [ArPerson { points_world: vec![], bbox: Some(bbox), age_ns: 0, pose: None }];
     let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &RenderConfig::default());
     // "5.0 M" at scale 2, centred on u = 320, just over the box's top (z 2.4 m: v = 240 - 460 *
     // 0.9 / 5 = 157): text rows 137-151.
@@ -294,6 +304,31 @@ fn a_person_in_view_is_labelled_with_their_distance() {
     let cfg = RenderConfig { label_people: false, ..RenderConfig::default() };
     let frame = render(&cam, &camera_pose(), &[], &people, &aligned(), &cfg);
     assert_eq!(count(&frame, COLOUR_LABEL), 0);
+}
+
+/// A person lying on the floor 4-6 m ahead, seen from eye height: their far end is higher on
+/// screen than the top of their box's centre, and the label still sits above all of them.
+#[test]
+fn a_lying_persons_label_sits_above_their_whole_body() {
+    use super::labels::COLOUR_LABEL;
+    use crate::detect::PersonPose;
+    let cam = CameraModel::default();
+    let bbox = OrientedBox { centre_m: Vector3::new(5.0, 0.0, 0.2), size_m: Vector3::new(1.8, 0.5, 0.4), yaw_rad: 0.0 };
+    let points: Vec<Vector3<f64>> = (0..=18)
+        .flat_map(|i| (0..=4).map(move |k| Vector3::new(4.1 + 0.1 * f64::from(i), 0.0, 0.1 * f64::from(k))))
+        .collect();
+    let person = ArPerson { points_world: points, bbox: Some(bbox), age_ns: 0, pose: Some(PersonPose::Lying) };
+    let cfg = RenderConfig { draw_boxes: false, ..RenderConfig::default() };
+    let frame = render(&cam, &camera_pose(), &[], &[person], &aligned(), &cfg);
+    let frame = &frame;
+    let rows_of =
+        |colour| (0..frame.height).filter(move |&v| (0..frame.width).any(|u| frame.pixel(u, v) == Some(colour)));
+    let body_top = rows_of(COLOUR_PERSON).min().unwrap();
+    let label_bottom = rows_of(COLOUR_LABEL).max().unwrap();
+    // The far end's top (5.9 m, 0.4 m high) is at v = 240 + 460 * 1.1 / 5.9 = 326; the box
+    // centre's top at 341.
+    assert!((320..330).contains(&body_top), "body from row {body_top}");
+    assert!(label_bottom < body_top, "label down to row {label_bottom}, body from row {body_top}");
 }
 
 /// A person to the responder's left (world +y) gets an arrow at the left edge; one behind gets

@@ -5,7 +5,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 4 | magic `STLK` |
-//! | 1 | format version (2) |
+//! | 1 | format version (3; version 2 is still read) |
 //! | 1 | kind (1 heartbeat, 2 clock probe, 3 clock reply, 4 robot pose, 5 detections, 6 map tile) |
 //! | 2 | reserved (0) |
 //! | 4 | payload length n (at most [`MAX_MESSAGE_BYTES`] for the whole frame) |
@@ -20,7 +20,7 @@
 //! | clock probe | u32 seq, u64 t1_ns |
 //! | clock reply | u32 seq, u64 t1_ns, t2_ns, t3_ns |
 //! | robot pose | u64 stamp_ns, u8 stamp clock, f64 x, y, z, f64 qi, qj, qk, qw (world_T_lidar) |
-//! | detections | u32 seq, u64 stamp_ns, u8 stamp clock, u64 scan_last_packet_host_ns, u64 sent_host_ns, u32 people; per person: f32 score, f64 centre x, y, z, f64 length, width, height, f64 yaw_rad, u32 points, then f32 x, y, z per point (world) |
+//! | detections | u32 seq, u64 stamp_ns, u8 stamp clock, u64 scan_last_packet_host_ns, u64 sent_host_ns, u32 people; per person: f32 score, u8 posture (version 3 only: 0 unknown, 1 upright, 2 sitting or crouching, 3 lying), f64 centre x, y, z, f64 length, width, height, f64 yaw_rad, u32 points, then f32 x, y, z per point (world) |
 //! | map tile | one tile of `align::tiles`, byte for byte (it has its own version and CRC) |
 //!
 //! A stamp clock is 1 device (free-running), 2 PTP, 3 GPS, 4 PPS, 5 host: a robot LiDAR stamp
@@ -35,12 +35,14 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::align::decode_tile;
 use crate::ar::{ArPerson, OrientedBox};
-use crate::detect::{Detection, WindowPoint};
+use crate::detect::{Detection, PersonPose, WindowPoint};
 use crate::PipelineError;
 use starc_time::{Clock, Stamp};
 
 const MAGIC: &[u8; 4] = b"STLK";
-const VERSION: u8 = 2;
+const VERSION: u8 = 3;
+/// The previous version, still read: its people carry no posture.
+const VERSION_NO_POSTURE: u8 = 2;
 /// Frame header: magic, version, kind, reserved, payload length.
 pub const HEADER_LEN: usize = 12;
 const CRC_LEN: usize = 4;
@@ -50,6 +52,7 @@ pub const MAX_MESSAGE_BYTES: usize = 16 << 20;
 pub const MAX_PEOPLE: usize = 1024;
 /// Most points (all people together) in one detections message.
 pub const MAX_POINTS_PER_MESSAGE: usize = 1 << 20;
+/// A person's fixed part in version 2 (version 3 adds the posture byte).
 const PERSON_HEADER_LEN: usize = 4 + 7 * 8 + 4;
 const POINT_LEN: usize = 12;
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
@@ -94,6 +97,8 @@ pub struct LinkPerson {
     /// Confidence in [0, 1].
     pub score: f32,
     pub bbox: OrientedBox,
+    /// The posture the robot's detector judged (`None` from a version 2 sender).
+    pub pose: Option<PersonPose>,
     /// The person's points, world frame (the robot's map frame), metres.
     pub points_world: Vec<[f32; 3]>,
 }
@@ -111,6 +116,7 @@ impl LinkPerson {
         Self {
             score: d.score as f32,
             bbox: OrientedBox { centre_m: d.centre_m, size_m: d.size_m, yaw_rad: d.yaw_rad },
+            pose: Some(d.pose),
             points_world,
         }
     }
@@ -125,6 +131,7 @@ impl LinkPerson {
                 .collect(),
             bbox: Some(self.bbox),
             age_ns,
+            pose: self.pose,
         }
     }
 }
@@ -182,6 +189,25 @@ fn finite(values: &[f64], what: &str) -> Result<(), PipelineError> {
     } else {
         Err(bad(format!("{what} is not finite")))
     }
+}
+
+fn posture_byte(pose: Option<PersonPose>) -> u8 {
+    match pose {
+        None => 0,
+        Some(PersonPose::Upright) => 1,
+        Some(PersonPose::Low) => 2,
+        Some(PersonPose::Lying) => 3,
+    }
+}
+
+fn posture_from_byte(b: u8) -> Result<Option<PersonPose>, PipelineError> {
+    Ok(match b {
+        0 => None,
+        1 => Some(PersonPose::Upright),
+        2 => Some(PersonPose::Low),
+        3 => Some(PersonPose::Lying),
+        other => return Err(bad(format!("unknown posture {other}"))),
+    })
 }
 
 fn put_stamp(p: &mut Vec<u8>, stamp: &Stamp) {
@@ -243,7 +269,7 @@ pub fn encode(m: &LinkMessage) -> Result<Vec<u8>, PipelineError> {
             if points > MAX_POINTS_PER_MESSAGE {
                 return Err(bad(format!("{points} points (at most {MAX_POINTS_PER_MESSAGE})")));
             }
-            p.reserve(32 + people.len() * PERSON_HEADER_LEN + points * POINT_LEN);
+            p.reserve(32 + people.len() * (PERSON_HEADER_LEN + 1) + points * POINT_LEN);
             p.extend_from_slice(&seq.to_le_bytes());
             put_stamp(&mut p, stamp);
             for t in [scan_last_packet_host_ns, sent_host_ns] {
@@ -256,6 +282,7 @@ pub fn encode(m: &LinkMessage) -> Result<Vec<u8>, PipelineError> {
                 finite(&values, "person box")?;
                 finite(&[f64::from(person.score)], "person score")?;
                 p.extend_from_slice(&person.score.to_le_bytes());
+                p.push(posture_byte(person.pose));
                 for v in values {
                     p.extend_from_slice(&v.to_le_bytes());
                 }
@@ -390,7 +417,7 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
         return Err(bad("bad magic (not a STARC link message)"));
     }
     let version = h.u8("version")?;
-    if version != VERSION {
+    if version != VERSION && version != VERSION_NO_POSTURE {
         return Err(PipelineError::Unsupported { format: FORMAT, what: format!("version {version}") });
     }
     let kind = h.u8("kind")?;
@@ -461,13 +488,16 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
             let count = r.u32("people")? as usize;
             // Each person needs its fixed part: a forged count cannot ask for more than the
             // bytes present.
-            if count > MAX_PEOPLE || count.saturating_mul(PERSON_HEADER_LEN) > r.remaining() {
+            let with_posture = version >= VERSION;
+            let person_len = PERSON_HEADER_LEN + usize::from(with_posture);
+            if count > MAX_PEOPLE || count.saturating_mul(person_len) > r.remaining() {
                 return Err(bad(format!("{count} people do not fit {} bytes (at most {MAX_PEOPLE})", r.remaining())));
             }
             let mut people = Vec::with_capacity(count);
             let mut total_points = 0usize;
             for _ in 0..count {
                 let score = r.f32("person score")?;
+                let pose = if with_posture { posture_from_byte(r.u8("person posture")?)? } else { None };
                 let mut v = [0.0; 7];
                 for x in v.iter_mut() {
                     *x = r.f64("person box")?;
@@ -486,7 +516,7 @@ pub fn decode(b: &[u8]) -> Result<LinkMessage, PipelineError> {
                     points_world.push([r.f32("point x")?, r.f32("point y")?, r.f32("point z")?]);
                 }
                 let bbox = OrientedBox { centre_m: Vector3::new(cx, cy, cz), size_m: Vector3::new(l, w, h), yaw_rad };
-                people.push(LinkPerson { score, bbox, points_world });
+                people.push(LinkPerson { score, bbox, pose, points_world });
             }
             LinkMessage::Detections { seq, stamp, scan_last_packet_host_ns, sent_host_ns, people }
         }

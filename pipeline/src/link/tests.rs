@@ -13,6 +13,7 @@ fn person(n: usize, seed: f32) -> LinkPerson {
     LinkPerson {
         score: 0.87,
         bbox: OrientedBox { centre_m: Vector3::new(3.0, -1.5, 0.9), size_m: Vector3::new(0.6, 0.5, 1.8), yaw_rad: 0.4 },
+        pose: Some(PersonPose::Upright),
         points_world: (0..n).map(|i| [seed + i as f32 * 0.01, -1.5, 0.1 + i as f32 * 0.001]).collect(),
     }
 }
@@ -105,7 +106,7 @@ fn detections_of_2000_points_stay_small() {
     let m = &every_kind()[5];
     let b = encode(m).unwrap();
     // 12 bytes per point plus fixed parts: no hidden blow-up.
-    assert_eq!(b.len(), HEADER_LEN + 33 + 3 * 64 + 2017 * 12 + 4);
+    assert_eq!(b.len(), HEADER_LEN + 33 + 3 * 65 + 2017 * 12 + 4);
 }
 
 #[test]
@@ -150,8 +151,12 @@ fn every_truncation_is_refused() {
 
 /// Rewrites a frame's payload and fixes up length and CRC, so only the payload check can refuse.
 fn reframe(kind: u8, payload: &[u8]) -> Vec<u8> {
+    reframe_as(2, kind, payload)
+}
+
+fn reframe_as(version: u8, kind: u8, payload: &[u8]) -> Vec<u8> {
     let mut b = b"STLK".to_vec();
-    b.push(2);
+    b.push(version);
     b.push(kind);
     b.extend_from_slice(&[0, 0]);
     b.extend_from_slice(&(payload.len() as u32).to_le_bytes());
@@ -203,8 +208,8 @@ fn oversize_counts_are_refused_before_allocating() {
 #[test]
 fn unknown_kind_version_role_and_bad_values_are_refused() {
     assert!(matches!(decode(&reframe(9, &[])), Err(PipelineError::Unsupported { .. })));
-    // Format 1 (before stamps carried their clock) and a future 3.
-    for version in [1, 3] {
+    // Format 1 (before stamps carried their clock) and a future 4.
+    for version in [1, 4] {
         let mut b = encode(&every_kind()[2]).unwrap();
         b[4] = version;
         assert!(decode(&b).is_err());
@@ -231,6 +236,60 @@ fn unknown_kind_version_role_and_bad_values_are_refused() {
     t[40] ^= 1;
     assert!(decode(&reframe(6, &t)).is_err());
     assert!(encode(&LinkMessage::MapTile { bytes: t }).is_err());
+}
+
+/// A detections payload (either version) with one person of `points` points.
+fn one_person_payload(posture: Option<u8>, points: u32) -> Vec<u8> {
+    let mut p = 1u32.to_le_bytes().to_vec();
+    p.extend_from_slice(&10u64.to_le_bytes());
+    p.push(2); // PTP
+    p.extend_from_slice(&[0; 16]);
+    p.extend_from_slice(&1u32.to_le_bytes());
+    p.extend_from_slice(&0.5f32.to_le_bytes());
+    p.extend(posture);
+    for v in [1.0f64, 2.0, 0.9, 0.5, 0.4, 1.7, 0.0] {
+        p.extend_from_slice(&v.to_le_bytes());
+    }
+    p.extend_from_slice(&points.to_le_bytes());
+    for i in 0..points {
+        for v in [1.0f32, 2.0, i as f32 * 0.1] {
+            p.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    p
+}
+
+#[test]
+fn posture_travels_and_a_version_2_sender_is_still_read() {
+    let people_of = |m: LinkMessage| match m {
+        LinkMessage::Detections { people, .. } => people,
+        other => panic!("{other:?}"),
+    };
+    // Ours: version 3, each posture and none.
+    let poses = [Some(PersonPose::Upright), Some(PersonPose::Low), Some(PersonPose::Lying), None];
+    let people: Vec<LinkPerson> = poses.iter().map(|&pose| LinkPerson { pose, ..person(3, 1.0) }).collect();
+    let m = LinkMessage::Detections {
+        seq: 1,
+        stamp: Stamp::new(1, Clock::Ptp),
+        scan_last_packet_host_ns: 2,
+        sent_host_ns: 3,
+        people,
+    };
+    let b = encode(&m).unwrap();
+    assert_eq!(b[4], 3, "written as version 3");
+    let back = people_of(decode(&b).unwrap());
+    assert_eq!(back.iter().map(|p| p.pose).collect::<Vec<_>>(), poses);
+    assert_eq!(back[2].to_ar_person(0).pose, Some(PersonPose::Lying));
+
+    // A version 2 sender (no posture byte): read, posture unknown, points intact.
+    let v2 = people_of(decode(&reframe_as(2, 5, &one_person_payload(None, 4))).unwrap());
+    assert_eq!((v2.len(), v2[0].pose, v2[0].points_world.len()), (1, None, 4));
+    // The same bytes as version 3 are 1 byte short (the posture byte shifts every field).
+    assert!(decode(&reframe_as(3, 5, &one_person_payload(None, 4))).is_err());
+    // Version 3: a known posture is read, an unknown one refused.
+    let v3 = people_of(decode(&reframe_as(3, 5, &one_person_payload(Some(2), 4))).unwrap());
+    assert_eq!(v3[0].pose, Some(PersonPose::Low));
+    assert!(matches!(decode(&reframe_as(3, 5, &one_person_payload(Some(7), 4))), Err(PipelineError::BadFile { .. })));
 }
 
 #[test]
@@ -260,8 +319,10 @@ fn person_converts_from_detection_and_to_ar() {
     let p = LinkPerson::from_detection(&d, &window);
     assert_eq!(p.points_world, vec![[1.0, 1.0, 2.0], [3.0, 1.0, 2.0]]);
     assert_eq!(p.score, 0.75);
+    assert_eq!(p.pose, Some(PersonPose::Upright));
     let ar = p.to_ar_person(7);
     assert_eq!(ar.age_ns, 7);
+    assert_eq!(ar.pose, Some(PersonPose::Upright));
     assert_eq!(ar.bbox.unwrap().centre_m, d.centre_m);
     assert_eq!(ar.points_world[1], Vector3::new(3.0, 1.0, 2.0));
 }

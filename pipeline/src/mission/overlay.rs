@@ -149,6 +149,7 @@ mod tests {
                 yaw_rad: 0.0,
             }),
             age_ns: 0,
+            pose: None,
         }
     }
 

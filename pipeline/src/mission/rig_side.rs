@@ -4,7 +4,7 @@
 //! worker thread), the offline run and the rerun of recordings drive it in time order (running
 //! them inline): one implementation, so the three cannot drift apart.
 
-use super::{render_view, AlignJob, AlignOutcome, AlignVerdict, Overlay, RigCore, RigCoreConfig, View};
+use super::{render_view, AlignJob, AlignOutcome, AlignVerdict, FrameTime, Overlay, RigCore, RigCoreConfig, View};
 use crate::align::TileMap;
 use crate::ar::inset::MapInset;
 use crate::ar::{ArPerson, CameraModel, RenderConfig};
@@ -189,14 +189,14 @@ impl RigSide {
         self.core.apply(outcome)
     }
 
-    /// The responder's frame at `t_ns` (rig LiDAR clock). `next_frame` moves the world pose's
-    /// bounded correction one frame on (each displayed frame does, once).
-    pub fn render(&mut self, t_ns: u64, link: &str, next_frame: bool) -> View {
+    /// The responder's frame at `time` (rig LiDAR clock). `next_frame` moves the world pose's
+    /// bounded correction one frame on (each displayed frame of new data does, once).
+    pub fn render(&mut self, time: FrameTime, link: &str, next_frame: bool) -> View {
         if next_frame {
             self.core.world_mut().step_frame();
         }
         let mut view =
-            render_view(&self.camera, &self.lidar_t_camera, &self.core, &self.overlay, t_ns, link, &self.render);
+            render_view(&self.camera, &self.lidar_t_camera, &self.core, &self.overlay, time, link, &self.render);
         if view.aligned {
             let world_t_rig = view.world_t_camera * self.lidar_t_camera.inverse();
             self.inset.draw(&mut view.frame, self.core.map(), &world_t_rig, &view.people, &self.render);
@@ -268,7 +268,7 @@ mod tests {
     fn person() -> Vec<ArPerson> {
         let bbox =
             OrientedBox { centre_m: Vector3::new(3.0, 0.0, 0.9), size_m: Vector3::new(0.5, 0.4, 1.8), yaw_rad: 0.0 };
-        vec![ArPerson { points_world: vec![bbox.centre_m], bbox: Some(bbox), age_ns: 0 }]
+        vec![ArPerson { points_world: vec![bbox.centre_m], bbox: Some(bbox), age_ns: 0, pose: None }]
     }
 
     #[test]

@@ -250,6 +250,7 @@ impl RobotCore {
                     ),
                     bbox: Some(OrientedBox { centre_m: det.centre_m, size_m: det.size_m, yaw_rad: det.yaw_rad }),
                     age_ns: 0,
+                    pose: Some(det.pose),
                 }
             })
             .collect();

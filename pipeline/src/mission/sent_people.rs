@@ -15,6 +15,7 @@ pub fn people_to_send(det: &RobotDetection) -> Vec<LinkPerson> {
             Some(LinkPerson {
                 score: *score as f32,
                 bbox: p.bbox?,
+                pose: p.pose,
                 points_world: p.points_world.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect(),
             })
         })
