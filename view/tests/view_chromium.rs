@@ -67,12 +67,12 @@ fn root() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
-/// tests/peers/chromium_view.py on `url`: the screenshot after `wait_s` and the page's status
-/// line (text, class).
-fn chromium_view(url: &str, shot: &Path, wait_s: f64) -> (String, String) {
+/// tests/peers/chromium_view.py on `url` in a window of `width` x `height`: the screenshot
+/// after `wait_s` and the page's status line (text, class).
+fn chromium_view(url: &str, shot: &Path, wait_s: f64, (width, height): (u32, u32)) -> (String, String) {
     let out = Command::new(root().join(".venv/bin/python"))
         .arg(root().join("tests/peers/chromium_view.py"))
-        .args([url, &shot.display().to_string(), &wait_s.to_string()])
+        .args([url, &shot.display().to_string(), &wait_s.to_string(), &width.to_string(), &height.to_string()])
         .stdin(Stdio::null())
         .output()
         .expect("running .venv/bin/python (scripts/test.sh sets it up)");
@@ -137,7 +137,9 @@ fn the_page_shows_the_newest_frame_and_the_status_in_headless_chromium() {
     let shot = dir.path().join("shot.png");
 
     // The page opens while the first frames are published and stays open past the switch.
-    let (line, class) = chromium_view(&server.url, &shot, WAIT_S);
+    // A run's frame is shot at a size for the docs; the test's frames in a small window.
+    let window = if only_shot { (680, 540) } else { (480, 320) };
+    let (line, class) = chromium_view(&server.url, &shot, WAIT_S, window);
     let bytes = std::fs::read(&shot).unwrap();
     if let Some(keep) = std::env::var_os("BROWSER_SHOT") {
         std::fs::write(PathBuf::from(keep), &bytes).unwrap();

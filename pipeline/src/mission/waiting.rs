@@ -16,7 +16,11 @@ pub enum Waiting {
     /// The view leaves a direction free (a corridor): it slides along `slide` (the rig's frame),
     /// or turns (`None`).
     Constraint { slide: Option<[f64; 3]> },
-    /// Refused for other reasons (an ambiguous or poor fit): the search goes on.
+    /// A fit was found, but another place `off_m` away fits the view as well (a symmetric
+    /// building, rooms alike, a corridor's repeated doors): more of the building must come into
+    /// view to tell them apart.
+    Lookalike { off_m: f64 },
+    /// Refused for other reasons (a poor fit): the search goes on.
     Search,
     /// A fit passed; `searches` searches agree on it so far, and more must before it is used.
     Confirming { searches: u32 },
@@ -31,6 +35,12 @@ impl Waiting {
             _ => None,
         }) {
             return Self::Overlap { share };
+        }
+        if let Some(off_m) = because.iter().find_map(|r| match r {
+            Rejection::ElsewhereAsGood { off_m, .. } => Some(*off_m),
+            _ => None,
+        }) {
+            return Self::Lookalike { off_m };
         }
         let slide = because.iter().find_map(|r| match r {
             Rejection::Degenerate { slide, .. } => Some(*slide),
@@ -58,6 +68,7 @@ impl fmt::Display for Waiting {
             }
             Self::Constraint { slide: Some(d) } => write!(f, "view slides {}: face a corner", slide_words(d)),
             Self::Constraint { slide: None } => f.write_str("view does not pin the pose: look around"),
+            Self::Lookalike { off_m } => write!(f, "map has a lookalike {off_m:.1} m away: keep moving"),
             Self::Search => f.write_str("searching the robot's map"),
             Self::Confirming { searches } => write!(f, "found a fit ({searches}x): confirming, keep moving"),
         }
@@ -86,5 +97,15 @@ mod tests {
         let ambiguous = refused(vec![Rejection::Residual { rms_m: 0.2, max_m: 0.05 }]);
         assert_eq!(Waiting::from_failure(&ambiguous), Waiting::Search);
         assert_eq!(Waiting::from_failure(&AlignFailure::NoAttempt), Waiting::FirstAttempt);
+        let lookalike = refused(vec![Rejection::ElsewhereAsGood {
+            off_m: 1.8,
+            off_deg: 0.2,
+            score: 0.88,
+            here_score: 0.91,
+            margin: 0.05,
+        }]);
+        let w = Waiting::from_failure(&lookalike);
+        assert_eq!(w, Waiting::Lookalike { off_m: 1.8 });
+        assert_eq!(w.to_string(), "map has a lookalike 1.8 m away: keep moving");
     }
 }
