@@ -2,8 +2,10 @@
 //! sighting, held for a while after the robot last saw them, with their age. A person is drawn
 //! once confirmed: seen in two detection windows within `CONFIRM_NS` of each other (a single
 //! window's false positive, held for a second, would otherwise stand on screen where no one is).
-//! A person seen walking is dropped sooner: once they may have walked `MAX_DRIFT_M` from where
-//! they were last seen, their points no longer show where they are.
+//! A person seen walking loses their points sooner: once they may have walked `MAX_DRIFT_M` from
+//! where they were last seen, their points no longer show where they are, and only their box
+//! (with its label, dimming with age like anyone's) stays for the hold: a walker the robot
+//! lost sight of for a moment does not vanish from the responder's screen.
 
 use super::person_motion::{self, WALKING_MPS};
 use crate::ar::{ArPerson, OrientedBox};
@@ -58,21 +60,18 @@ impl Overlay {
     }
 
     /// Everyone seen in the `hold_ns` up to `t_ns`, each at their latest sighting, aged; people
-    /// seen walking only while they cannot have walked `MAX_DRIFT_M` since.
+    /// seen walking with their points only while they cannot have walked `MAX_DRIFT_M` since,
+    /// their box alone after that.
     pub fn at(&self, t_ns: u64) -> Vec<ArPerson> {
         let mut out: Vec<ArPerson> = Vec::new();
-        // Latest sightings not drawn: their person's older sightings are not drawn either.
-        let mut dropped: Vec<Vector3<f64>> = Vec::new();
         for s in self.shown.iter().rev().filter(|s| s.stamp_ns <= t_ns && s.stamp_ns + self.hold_ns >= t_ns) {
             for p in &s.people {
                 let Some(b) = p.bbox else { continue };
-                // Someone already drawn or dropped at a later sighting: the newest one nearby, or
-                // theirs followed window by window (a walker is by then further away than one
-                // person's sightings are apart, and would be drawn twice).
-                let shown_near = |c: &Vector3<f64>| {
-                    out.iter().filter_map(|q| q.bbox).any(|q| same_person(&q.centre_m, c))
-                        || dropped.iter().any(|q| same_person(q, c))
-                };
+                // Someone already drawn at a later sighting: the newest one nearby, or theirs
+                // followed window by window (a walker is by then further away than one person's
+                // sightings are apart, and would be drawn twice).
+                let shown_near =
+                    |c: &Vector3<f64>| out.iter().filter_map(|q| q.bbox).any(|q| same_person(&q.centre_m, c));
                 let seen = shown_near(&b.centre_m) || shown_near(&self.latest_sighting(s.stamp_ns, &b.centre_m, t_ns));
                 // Confirmed by an earlier sighting in the `CONFIRM_NS` before this one.
                 if seen || self.earlier_sighting(s.stamp_ns, 1, &b.centre_m).is_none() {
@@ -82,7 +81,7 @@ impl Overlay {
                 let speed = self.speed_mps(s.stamp_ns, &b.centre_m);
                 let walking = b.size_m.z >= WALKER_MIN_HEIGHT_M && speed >= WALKING_MPS;
                 if walking && speed * age_ns as f64 * 1e-9 > MAX_DRIFT_M {
-                    dropped.push(b.centre_m);
+                    out.push(ArPerson { age_ns, points_world: Vec::new(), ..p.clone() });
                 } else {
                     out.push(ArPerson { age_ns, ..p.clone() });
                 }
@@ -180,24 +179,29 @@ mod tests {
     }
 
     #[test]
-    fn a_walker_is_dropped_once_they_may_have_walked_away_and_a_standing_person_is_held() {
+    fn a_walker_keeps_only_their_box_once_they_may_have_walked_away_and_a_standing_person_is_held() {
         const MS: u64 = 1_000_000;
         let mut o = Overlay::new(1_000 * MS);
         // A walker at 1.4 m/s and a person standing 5 m away, seen every 100 ms to 500 ms.
         for k in 1..=5u32 {
             o.push(u64::from(k) * 100 * MS, vec![person(0.14 * f64::from(k)), person(5.0 + 0.01 * f64::from(k % 2))]);
         }
+        // The walker as drawn: (people, points) near them.
         let walker = |o: &Overlay, t_ms: u64| {
-            o.at(t_ms * MS).iter().filter(|p| p.bbox.is_some_and(|b| b.centre_m.x < 2.0)).count()
+            let near: Vec<ArPerson> =
+                o.at(t_ms * MS).into_iter().filter(|p| p.bbox.is_some_and(|b| b.centre_m.x < 2.0)).collect();
+            (near.len(), near.iter().map(|p| p.points_world.len()).sum::<usize>())
         };
-        assert_eq!(walker(&o, 550), 1, "0.07 m since their last sighting");
-        assert_eq!(walker(&o, 600), 0, "0.14 m: no longer where they were drawn");
-        assert_eq!(walker(&o, 1_400), 0, "nor at an older sighting");
+        assert_eq!(walker(&o, 550), (1, 1), "0.07 m since their last sighting: their points");
+        assert_eq!(walker(&o, 600), (1, 0), "0.14 m: no longer where their points are; their box stays");
+        assert_eq!(walker(&o, 1_400), (1, 0), "once, at their latest sighting, not at an older one");
+        assert_eq!(walker(&o, 1_550), (0, 0), "gone after the hold");
         // Later detections without the walker do not make them stand still.
         o.push(1_200 * MS, vec![person(5.0)]);
         o.push(1_450 * MS, vec![person(5.0)]);
-        assert_eq!(walker(&o, 1_450), 0, "their speed outlives the sightings it was measured on");
-        assert_eq!(o.at(1_400 * MS).len(), 1, "the standing person is held for the whole second");
+        assert_eq!(walker(&o, 1_450), (1, 0), "their speed outlives the sightings it was measured on");
+        let standing = o.at(1_400 * MS).into_iter().filter(|p| !p.points_world.is_empty()).count();
+        assert_eq!(standing, 1, "the standing person is held, points and all, for the whole second");
     }
 
     #[test]
