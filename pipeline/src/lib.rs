@@ -16,6 +16,7 @@ pub mod ar;
 pub mod cloud;
 pub mod detect;
 pub mod error;
+pub mod explore;
 pub mod link;
 pub mod lio;
 pub mod mission;

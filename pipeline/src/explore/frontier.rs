@@ -1,0 +1,89 @@
+//! Frontiers: where the known, traversable floor meets the unknown, grouped into clusters the
+//! robot can drive to. A frontier cell is traversable and has an unknown 4-neighbour; frontier
+//! cells touching (8-connected) are one frontier. Clusters smaller than `min_cells` (a gap
+//! between two returns, a cell behind a chair leg) are left out.
+
+use super::occupancy::{Cell, OccupancyGrid};
+use std::collections::VecDeque;
+
+/// One frontier: its cells, their mean (world x, y), and the cell of the frontier nearest that
+/// mean, where the robot should go to look past it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frontier {
+    pub cells: Vec<(usize, usize)>,
+    pub centroid_m: [f64; 2],
+    pub goal: (usize, usize),
+}
+
+impl Frontier {
+    /// The frontier's length, metres (cells times the cell size).
+    pub fn length_m(&self, cell_m: f64) -> f64 {
+        self.cells.len() as f64 * cell_m
+    }
+}
+
+/// Whether a cell is on a frontier.
+pub fn is_frontier(grid: &OccupancyGrid, (i, j): (usize, usize)) -> bool {
+    if !grid.traversable((i, j)) {
+        return false;
+    }
+    let side = grid.side();
+    let unknown = |c: (usize, usize)| grid.cell(c) == Cell::Unknown;
+    (i > 0 && unknown((i - 1, j)))
+        || (i + 1 < side && unknown((i + 1, j)))
+        || (j > 0 && unknown((i, j - 1)))
+        || (j + 1 < side && unknown((i, j + 1)))
+}
+
+/// Every frontier of at least `min_cells` cells, largest first.
+pub fn frontiers(grid: &OccupancyGrid, min_cells: usize) -> Vec<Frontier> {
+    let side = grid.side();
+    let mut seen = vec![false; side * side];
+    let mut out = Vec::new();
+    for j in 0..side {
+        for i in 0..side {
+            if seen.get(j * side + i).copied().unwrap_or(true) || !is_frontier(grid, (i, j)) {
+                continue;
+            }
+            let cells = flood(grid, (i, j), &mut seen);
+            if cells.len() >= min_cells.max(1) {
+                out.push(cluster(grid, cells));
+            }
+        }
+    }
+    out.sort_by_key(|f| std::cmp::Reverse(f.cells.len()));
+    out
+}
+
+/// The frontier cells 8-connected to `start`, marking them seen.
+fn flood(grid: &OccupancyGrid, start: (usize, usize), seen: &mut [bool]) -> Vec<(usize, usize)> {
+    let side = grid.side();
+    let mut cells = Vec::new();
+    let mut queue = VecDeque::from([start]);
+    if let Some(s) = seen.get_mut(start.1 * side + start.0) {
+        *s = true;
+    }
+    while let Some(c) = queue.pop_front() {
+        cells.push(c);
+        for n in grid.neighbours(c) {
+            let Some(s) = seen.get_mut(n.1 * side + n.0) else { continue };
+            if !*s && is_frontier(grid, n) {
+                *s = true;
+                queue.push_back(n);
+            }
+        }
+    }
+    cells
+}
+
+fn cluster(grid: &OccupancyGrid, cells: Vec<(usize, usize)>) -> Frontier {
+    let n = cells.len().max(1) as f64;
+    let (sx, sy) = cells.iter().map(|&c| grid.centre_of(c)).fold((0.0, 0.0), |(x, y), [cx, cy]| (x + cx, y + cy));
+    let centroid_m = [sx / n, sy / n];
+    let d2 = |c: &(usize, usize)| {
+        let [x, y] = grid.centre_of(*c);
+        (x - centroid_m[0]).powi(2) + (y - centroid_m[1]).powi(2)
+    };
+    let goal = cells.iter().min_by(|a, b| d2(a).total_cmp(&d2(b))).copied().unwrap_or((0, 0));
+    Frontier { cells, centroid_m, goal }
+}

@@ -1,0 +1,152 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use super::*;
+use nalgebra::Vector3;
+
+/// Points every 5 cm along a segment at height z.
+fn line(a: [f64; 2], b: [f64; 2], z: f64) -> Vec<Vector3<f64>> {
+    let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / 0.05).ceil() as usize;
+    (0..=n)
+        .map(|k| {
+            let f = k as f64 / n.max(1) as f64;
+            Vector3::new(a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, z)
+        })
+        .collect()
+}
+
+/// Floor points every 5 cm over a rectangle at height z.
+fn floor(lo: [f64; 2], hi: [f64; 2], z: f64) -> Vec<Vector3<f64>> {
+    let mut out = Vec::new();
+    let (nx, ny) = (((hi[0] - lo[0]) / 0.05) as usize, ((hi[1] - lo[1]) / 0.05) as usize);
+    for i in 0..=nx {
+        for j in 0..=ny {
+            out.push(Vector3::new(lo[0] + i as f64 * 0.05, lo[1] + j as f64 * 0.05, z));
+        }
+    }
+    out
+}
+
+/// A 6 x 4 m room (x 0-6, y 0-4) with a 1 m doorway in its x = 6 wall (y 1.5-2.5), seen from
+/// (1, 2) at 0.5 m: its floor, its walls at 1 m, and the floor 1 m past the doorway.
+fn room_scan() -> Vec<Vector3<f64>> {
+    let mut pts = floor([0.1, 0.1], [5.9, 3.9], 0.0);
+    pts.extend(line([0.0, 0.0], [6.0, 0.0], 1.0));
+    pts.extend(line([0.0, 4.0], [6.0, 4.0], 1.0));
+    pts.extend(line([0.0, 0.0], [0.0, 4.0], 1.0));
+    pts.extend(line([6.0, 0.0], [6.0, 1.5], 1.0));
+    pts.extend(line([6.0, 2.5], [6.0, 4.0], 1.0));
+    pts.extend(floor([6.05, 1.6], [7.0, 2.4], 0.0));
+    pts
+}
+
+fn grid() -> OccupancyGrid {
+    let cfg = OccupancyConfig { extent_m: 20.0, ..OccupancyConfig::default() };
+    OccupancyGrid::new(cfg, [3.0, 2.0]).unwrap()
+}
+
+fn at(g: &OccupancyGrid, x: f64, y: f64) -> (usize, usize) {
+    g.cell_of(x, y).unwrap()
+}
+
+#[test]
+fn a_room_is_free_inside_occupied_at_its_walls_and_unknown_behind_them() {
+    let mut g = grid();
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &room_scan());
+    assert_eq!(g.cell(at(&g, 3.0, 2.0)), Cell::Free);
+    assert!(g.traversable(at(&g, 3.0, 2.0)));
+    assert_eq!(g.cell(at(&g, 3.02, 0.02)), Cell::Occupied, "the y = 0 wall");
+    assert_eq!(g.cell(at(&g, 6.02, 3.0)), Cell::Occupied, "the x = 6 wall");
+    assert_eq!(g.cell(at(&g, 3.0, -1.0)), Cell::Unknown, "behind the wall");
+    assert_eq!(g.cell(at(&g, 6.5, 2.0)), Cell::Free, "through the doorway");
+    assert_eq!(g.cell(at(&g, 8.0, 2.0)), Cell::Unknown, "past what was seen");
+    let (free, occupied) = g.known();
+    assert!(free > 2000 && occupied > 150, "{free} free, {occupied} occupied");
+}
+
+#[test]
+fn the_one_frontier_is_past_the_doorway() {
+    let mut g = grid();
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &room_scan());
+    let found = frontiers(&g, 3);
+    assert_eq!(found.len(), 1, "{:?}", found.iter().map(|f| f.centroid_m).collect::<Vec<_>>());
+    let f = &found[0];
+    let [x, y] = g.centre_of(f.goal);
+    assert!((6.6..7.2).contains(&x) && (1.4..2.6).contains(&y), "goal at ({x:.2}, {y:.2})");
+    assert!(g.traversable(f.goal));
+    // Its length is about the seen floor's edge past the door (0.8 m wide) and its sides.
+    assert!((0.6..3.0).contains(&f.length_m(0.1)), "{} m", f.length_m(0.1));
+    // Closed: the floor past the doorway seen to the far wall leaves no frontier there.
+    let mut closed = grid();
+    let mut scan = room_scan();
+    scan.extend(floor([6.05, 1.6], [9.9, 2.4], 0.0));
+    scan.extend(line([10.0, 1.5], [10.0, 2.5], 1.0));
+    scan.extend(line([6.0, 1.5], [10.0, 1.5], 1.0));
+    scan.extend(line([6.0, 2.5], [10.0, 2.5], 1.0));
+    closed.add_scan(&Vector3::new(1.0, 2.0, 0.5), &scan);
+    closed.add_scan(&Vector3::new(6.5, 2.0, 0.5), &scan);
+    assert!(
+        frontiers(&closed, 3).is_empty(),
+        "{:?}",
+        frontiers(&closed, 3).iter().map(|f| f.centroid_m).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn what_blocks_is_in_the_body_band_and_what_is_overhead_does_not() {
+    let mut g = grid();
+    let mut scan = room_scan();
+    // A table top at 0.75 m around (3, 1) and a lamp's shade at 2.2 m over (3, 3).
+    scan.extend(floor([2.8, 0.8], [3.2, 1.2], 0.75));
+    scan.extend(floor([2.8, 2.8], [3.2, 3.2], 2.2));
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &scan);
+    assert_eq!(g.cell(at(&g, 3.0, 1.0)), Cell::Occupied);
+    assert!(!g.traversable(at(&g, 3.0, 1.0)));
+    assert_eq!(g.cell(at(&g, 3.0, 3.0)), Cell::Free);
+}
+
+#[test]
+fn steps_the_base_cannot_climb_are_not_traversable_and_a_sill_is() {
+    // A platform 15 cm up (x 3-6): in the body band, so it blocks, top and all.
+    let mut g = grid();
+    let mut scan = floor([0.1, 0.1], [2.95, 3.9], 0.0);
+    scan.extend(floor([3.0, 0.1], [5.9, 3.9], 0.15));
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &scan);
+    assert!(g.traversable(at(&g, 1.5, 2.0)));
+    assert_eq!(g.cell(at(&g, 4.5, 2.0)), Cell::Occupied, "the platform");
+    // A sill 3 cm up is floor; a floor sunk 15 cm (x 3-6) is floor too, but its edge is a step.
+    for (z, edge_ok) in [(0.03, true), (-0.15, false)] {
+        let mut g = grid();
+        let mut scan = floor([0.1, 0.1], [2.95, 3.9], 0.0);
+        scan.extend(floor([3.0, 0.1], [5.9, 3.9], z));
+        g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &scan);
+        assert!(g.traversable(at(&g, 4.5, 2.0)), "z {z}: the other floor's middle");
+        let edge = g.traversable(at(&g, 2.97, 2.0)) && g.traversable(at(&g, 3.03, 2.0));
+        assert_eq!(edge, edge_ok, "z {z}: the edge between them");
+    }
+    // A stairwell: rays cross its cells (to the floor beyond) but no floor return falls in it.
+    let mut g = grid();
+    let mut scan = floor([0.1, 0.1], [2.95, 3.9], 0.0);
+    scan.extend(floor([4.0, 0.1], [5.9, 3.9], 0.0));
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &scan);
+    assert_eq!(g.cell(at(&g, 3.5, 2.0)), Cell::Free, "crossed by rays");
+    assert!(!g.traversable(at(&g, 3.5, 2.0)), "but no floor seen there");
+    assert!(!is_frontier(&g, at(&g, 3.5, 2.0)));
+}
+
+#[test]
+fn bad_points_and_places_outside_the_grid_do_nothing_bad() {
+    let mut g = grid();
+    let junk = [
+        Vector3::new(f64::NAN, 0.0, 0.0),
+        Vector3::new(1e12, 1e12, 0.0),
+        Vector3::new(-1e9, 3.0, 1.0),
+        Vector3::new(f64::INFINITY, 2.0, 0.5),
+    ];
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &junk);
+    g.add_scan(&Vector3::new(1e9, 0.0, 0.5), &room_scan());
+    g.add_scan(&Vector3::new(f64::NAN, 0.0, 0.5), &room_scan());
+    assert!(g.known().1 == 0);
+    assert!(OccupancyGrid::new(OccupancyConfig { cell_m: 0.0, ..OccupancyConfig::default() }, [0.0, 0.0]).is_none());
+    assert!(OccupancyGrid::new(OccupancyConfig { extent_m: 1e9, ..OccupancyConfig::default() }, [0.0, 0.0]).is_none());
+    assert_eq!(g.cell((usize::MAX, 0)), Cell::Unknown);
+}
