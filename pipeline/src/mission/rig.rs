@@ -380,6 +380,9 @@ pub struct RigCore {
     history: RigHistory,
     /// What the view draws of the rig's surroundings.
     view: RecentVoxels,
+    /// `view`'s points grouped by block, rebuilt once per scan: the frame draws them in this
+    /// order, so consecutive points land near each other on screen and in the depth buffer.
+    view_sorted: Vec<Vector3<f64>>,
 }
 
 /// A first alignment that passed its tests, waiting for later searches to agree.
@@ -417,6 +420,7 @@ impl RigCore {
             candidate: None,
             history: RigHistory::new(cfg.window.voxel_m, cfg.first_history_ns),
             view: RecentVoxels::new(cfg.view_voxel_m, cfg.view_keep_ns),
+            view_sorted: Vec::new(),
             cfg,
         })
     }
@@ -496,6 +500,7 @@ impl RigCore {
             let placed = self.placer.place(&o);
             let points: Vec<Vector3<f64>> = placed.iter().map(|p| p.xyz()).collect();
             self.view.add(&points, o.end_ns);
+            self.view.points_by_block(&mut self.view_sorted);
             let _ = self.world.push_odometry(o.end_ns, o.lidar_pose);
             let _ = self.odom.push(o.end_ns, o.lidar_pose);
             if self.first_ns.is_none() {
@@ -512,7 +517,7 @@ impl RigCore {
     /// The rig's points of the last `view_keep_ns`, one per voxel, in its odometry frame: what
     /// the view draws of the surroundings.
     pub fn view_points(&self) -> impl Iterator<Item = &Vector3<f64>> {
-        self.view.points()
+        self.view_sorted.iter()
     }
 
     pub fn first_ns(&self) -> Option<u64> {
