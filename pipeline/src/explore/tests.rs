@@ -150,3 +150,68 @@ fn bad_points_and_places_outside_the_grid_do_nothing_bad() {
     assert!(OccupancyGrid::new(OccupancyConfig { extent_m: 1e9, ..OccupancyConfig::default() }, [0.0, 0.0]).is_none());
     assert_eq!(g.cell((usize::MAX, 0)), Cell::Unknown);
 }
+
+/// The room with its doorway `door_m` wide (centred on y = 2), seen from (1, 2).
+fn room_with_door(door_m: f64) -> OccupancyGrid {
+    let (lo, hi) = (2.0 - door_m / 2.0, 2.0 + door_m / 2.0);
+    let mut pts = floor([0.1, 0.1], [5.9, 3.9], 0.0);
+    pts.extend(line([0.0, 0.0], [6.0, 0.0], 1.0));
+    pts.extend(line([0.0, 4.0], [6.0, 4.0], 1.0));
+    pts.extend(line([0.0, 0.0], [0.0, 4.0], 1.0));
+    pts.extend(line([6.0, 0.0], [6.0, lo], 1.0));
+    pts.extend(line([6.0, hi], [6.0, 4.0], 1.0));
+    pts.extend(floor([6.05, lo + 0.1], [7.0, hi - 0.1], 0.0));
+    let mut g = grid();
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), &pts);
+    g
+}
+
+#[test]
+fn the_goal_is_past_the_doorway_and_the_way_keeps_clear_of_the_walls() {
+    let g = room_with_door(1.0);
+    let robot = at(&g, 1.0, 2.0);
+    let cfg = PlanConfig::default();
+    let ok = usable(&g, robot, cfg.robot_radius_m);
+    let costs = Costs::from(&g, &ok, robot);
+    let found = frontiers(&g, 3);
+    let choice = choose_goal(&g, &found, &costs, &[], &cfg).expect("a goal");
+    let [x, _] = g.centre_of(choice.goal);
+    assert!(x > 6.0, "goal at x {x:.2}");
+    assert!((5.0..7.5).contains(&choice.travel_m), "{} m", choice.travel_m);
+    let path = costs.path_to(choice.goal);
+    assert_eq!(path.first(), Some(&robot));
+    assert_eq!(path.last(), Some(&choice.goal));
+    // Every step is to a neighbour, on usable floor, and at least the radius from every wall cell.
+    for w in path.windows(2) {
+        assert!(w[0].0.abs_diff(w[1].0) <= 1 && w[0].1.abs_diff(w[1].1) <= 1);
+    }
+    let side = g.side();
+    let walls: Vec<[f64; 2]> = (0..side * side)
+        .map(|k| (k % side, k / side))
+        .filter(|&c| g.cell(c) == Cell::Occupied)
+        .map(|c| g.centre_of(c))
+        .collect();
+    for &c in &path[3..] {
+        let [x, y] = g.centre_of(c);
+        let nearest = walls.iter().map(|w| (w[0] - x).hypot(w[1] - y)).fold(f64::INFINITY, f64::min);
+        assert!(nearest > cfg.robot_radius_m - 1e-9, "({x:.2}, {y:.2}) is {nearest:.2} m from a wall");
+    }
+    // Blacklisted (the robot could not get there): no other frontier, so no goal.
+    let [gx, gy] = g.centre_of(choice.goal);
+    assert!(choose_goal(&g, &found, &costs, &[[gx, gy]], &PlanConfig { blacklist_radius_m: 2.0, ..cfg }).is_none());
+}
+
+#[test]
+fn a_frontier_past_a_door_narrower_than_the_robot_is_not_chosen() {
+    let g = room_with_door(0.5);
+    let robot = at(&g, 1.0, 2.0);
+    let cfg = PlanConfig::default();
+    let found = frontiers(&g, 1);
+    assert!(!found.is_empty(), "the floor past the door is a frontier");
+    let costs = Costs::from(&g, &usable(&g, robot, cfg.robot_radius_m), robot);
+    assert_eq!(choose_goal(&g, &found, &costs, &[], &cfg), None);
+    // A robot half as wide fits through.
+    let narrow = PlanConfig { robot_radius_m: 0.15, ..cfg };
+    let costs = Costs::from(&g, &usable(&g, robot, narrow.robot_radius_m), robot);
+    assert!(choose_goal(&g, &found, &costs, &[], &narrow).is_some());
+}
