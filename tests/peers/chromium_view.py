@@ -4,8 +4,10 @@ page's status line, over the DevTools protocol (PyPI websockets).
 
 usage: chromium_view.py URL SCREENSHOT.png WAIT_S [WIDTH HEIGHT]
 
-Prints one JSON line: {"status": <status line text>, "class": <its class>, "width": ..,
-"height": ..}. Chromium reaches nothing but loopback: other hosts go to a proxy at a closed
+Two phases: WAIT_S after the page was opened it takes FIRST.png (SCREENSHOT with "first"
+before its suffix) and prints {"phase": "first"}; then it waits for one line on stdin (the
+caller changing what is published), WAIT_S more, and takes SCREENSHOT. Prints a last JSON line:
+{"status": <status line text>, "class": <its class>, "width": .., "height": ..}. Chromium reaches nothing but loopback: other hosts go to a proxy at a closed
 loopback port, host names do not resolve, background services are off. It runs in a session
 (process group) of its own with a throwaway profile, killed as a group at the end whatever
 happens.
@@ -29,6 +31,7 @@ FLAGS = [
     "--headless",
     "--no-sandbox",
     "--disable-gpu",
+    "--disable-dev-shm-usage",
     "--hide-scrollbars",
     "--no-first-run",
     "--no-default-browser-check",
@@ -87,10 +90,19 @@ def drive(port: int, url: str, shot: str, wait_s: float, width: int, height: int
         page = Page(ws)
         page.call("Emulation.setDeviceMetricsOverride", width=width, height=height, deviceScaleFactor=1, mobile=False)
         page.call("Page.navigate", url=url)
+
+        def capture(path: str) -> None:
+            png = base64.b64decode(page.call("Page.captureScreenshot", format="png")["data"])
+            with open(path, "wb") as f:
+                f.write(png)
+
         time.sleep(wait_s)
-        png = base64.b64decode(page.call("Page.captureScreenshot", format="png")["data"])
-        with open(shot, "wb") as f:
-            f.write(png)
+        root, ext = os.path.splitext(shot)
+        capture(root + ".first" + ext)
+        print(json.dumps({"phase": "first"}), flush=True)
+        sys.stdin.readline()
+        time.sleep(wait_s)
+        capture(shot)
         expr = "JSON.stringify([document.getElementById('status').textContent, document.getElementById('status').className])"
         value = page.call("Runtime.evaluate", expression=expr, returnByValue=True)["result"]["value"]
         text, cls = json.loads(value)

@@ -1,11 +1,12 @@
 //! The browser page in headless Chromium (Debian's `chromium`, installed by scripts/test.sh): the
-//! page shows the newest published frame (the stream keeps updating the image, not only its
-//! first part), and its status line, read from /status.json by the page's script, says what the
-//! rig's status says, in green.
+//! page shows the published frame, then, once other frames are published while it stays open,
+//! the newest (the stream keeps updating the image, not only its first part), and its status
+//! line, read from /status.json by the page's script, says what the rig's status says, in green.
 //!
 //! tests/peers/chromium_view.py drives Chromium over the DevTools protocol (PyPI websockets):
-//! the page stays open for a few seconds of real time, which `--screenshot` does not allow (it
-//! shoots at the load event, the first frame). Chromium reaches nothing but loopback: every other
+//! it shoots the page, tells the test, which switches what it publishes, and shoots again. Both
+//! screenshots are taken after a set time, whatever the machine's load, which `--screenshot`
+//! does not allow (it shoots at the load event, the first frame). Chromium reaches nothing but loopback: every other
 //! host goes to a proxy at a closed loopback port, host names do not resolve, its background
 //! services (updates, sync, metrics) are off; it runs in a process group of its own with a
 //! throwaway profile, and the group is killed at the end, so no browser process outlives it.
@@ -18,6 +19,7 @@
 
 use starc_pipeline::ar::ArFrame;
 use starc_view::{serve_http, ViewHub, ViewStatus};
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -26,10 +28,8 @@ use std::time::{Duration, Instant};
 
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 240;
-/// Frames before this are the first colour and not aligned; after it, the second and aligned.
-const SWITCH_AFTER: Duration = Duration::from_millis(1500);
-/// How long the page is open before the screenshot (seconds): past the switch.
-const WAIT_S: f64 = 3.5;
+/// How long the page is open before each screenshot (seconds).
+const WAIT_S: f64 = 2.0;
 const FIRST: [u8; 3] = [150, 20, 150];
 const SECOND: [u8; 3] = [20, 150, 150];
 
@@ -48,14 +48,14 @@ fn status(aligned: bool, seq: u64) -> ViewStatus {
     }
 }
 
-/// Publishes at 20 Hz until `stop`: the first colour, then the second once `SWITCH_AFTER` has
-/// passed (or `fixed` throughout).
-fn publish_until(hub: ViewHub, stop: Arc<AtomicBool>, fixed: Option<ArFrame>) {
+/// Publishes at 20 Hz until `stop`: the first colour, not aligned, until `switched`, then the
+/// second, aligned (or `fixed` throughout, aligned).
+fn publish_until(hub: ViewHub, stop: Arc<AtomicBool>, switched: Arc<AtomicBool>, fixed: Option<ArFrame>) {
     let start = Instant::now();
     let mut seq = 0;
-    while !stop.load(Ordering::Relaxed) && start.elapsed() < Duration::from_secs(60) {
+    while !stop.load(Ordering::Relaxed) && start.elapsed() < Duration::from_secs(120) {
         seq += 1;
-        let second = start.elapsed() >= SWITCH_AFTER;
+        let second = switched.load(Ordering::Relaxed);
         let frame = fixed.clone().unwrap_or_else(|| solid(if second { SECOND } else { FIRST }));
         hub.publish(&frame, status(second || fixed.is_some(), seq)).unwrap();
         std::thread::sleep(Duration::from_millis(50));
@@ -67,18 +67,40 @@ fn root() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
-/// tests/peers/chromium_view.py on `url` in a window of `width` x `height`: the screenshot
-/// after `wait_s` and the page's status line (text, class).
-fn chromium_view(url: &str, shot: &Path, wait_s: f64, (width, height): (u32, u32)) -> (String, String) {
-    let out = Command::new(root().join(".venv/bin/python"))
+/// tests/peers/chromium_view.py on `url` in a window of `width` x `height`: a first screenshot
+/// `wait_s` after the page opened, then `switch` is set, then the final screenshot `wait_s`
+/// later (the first beside it, `.first` before the suffix) and the page's status line (text,
+/// class).
+fn chromium_view(
+    url: &str,
+    shot: &Path,
+    wait_s: f64,
+    (width, height): (u32, u32),
+    switch: &AtomicBool,
+) -> (String, String) {
+    let mut child = Command::new(root().join(".venv/bin/python"))
         .arg(root().join("tests/peers/chromium_view.py"))
         .args([url, &shot.display().to_string(), &wait_s.to_string(), &width.to_string(), &height.to_string()])
-        .stdin(Stdio::null())
-        .output()
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("running .venv/bin/python (scripts/test.sh sets it up)");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "chromium_view.py: {}\n{stdout}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut last = String::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        if line.contains("\"phase\"") {
+            switch.store(true, Ordering::Relaxed);
+            writeln!(stdin, "go").unwrap();
+        } else {
+            last = line;
+        }
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "chromium_view.py: {}\n{last}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(last.trim()).unwrap();
     (v["status"].as_str().unwrap().to_string(), v["class"].as_str().unwrap().to_string())
 }
 
@@ -105,6 +127,7 @@ struct Server {
     url: String,
     _stop: tokio::sync::watch::Sender<bool>,
     publishing: Arc<AtomicBool>,
+    switched: Arc<AtomicBool>,
     publisher: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -122,10 +145,11 @@ fn serve(fixed: Option<ArFrame>) -> Server {
     let hub = ViewHub::new();
     let (stop, shutdown) = tokio::sync::watch::channel(false);
     let (addr, _task) = rt.block_on(serve_http("127.0.0.1:0".parse().unwrap(), hub.clone(), shutdown)).unwrap();
-    let publishing = Arc::new(AtomicBool::new(false));
-    let flag = publishing.clone();
-    let publisher = std::thread::spawn(move || publish_until(hub, flag, fixed));
-    Server { _rt: rt, url: format!("http://{addr}/"), _stop: stop, publishing, publisher: Some(publisher) }
+    let (publishing, switched) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+    let (flag, switch) = (publishing.clone(), switched.clone());
+    let publisher = std::thread::spawn(move || publish_until(hub, flag, switch, fixed));
+    let url = format!("http://{addr}/");
+    Server { _rt: rt, url, _stop: stop, publishing, switched, publisher: Some(publisher) }
 }
 
 #[test]
@@ -136,10 +160,10 @@ fn the_page_shows_the_newest_frame_and_the_status_in_headless_chromium() {
     let dir = tempfile::tempdir().unwrap();
     let shot = dir.path().join("shot.png");
 
-    // The page opens while the first frames are published and stays open past the switch.
-    // A run's frame is shot at a size for the docs; the test's frames in a small window.
+    // The page opens on the first frames, is shot, then the second frames are published and it
+    // is shot again. A run's frame is shot at a size for the docs; the test's in a small window.
     let window = if only_shot { (680, 540) } else { (480, 320) };
-    let (line, class) = chromium_view(&server.url, &shot, WAIT_S, window);
+    let (line, class) = chromium_view(&server.url, &shot, WAIT_S, window, &server.switched);
     let bytes = std::fs::read(&shot).unwrap();
     if let Some(keep) = std::env::var_os("BROWSER_SHOT") {
         std::fs::write(PathBuf::from(keep), &bytes).unwrap();
@@ -147,11 +171,16 @@ fn the_page_shows_the_newest_frame_and_the_status_in_headless_chromium() {
     if only_shot {
         return;
     }
+    let frame_px = (WIDTH * HEIGHT) as usize;
+    // First the first frames, the status line red.
+    let first_shot = decode_png(&std::fs::read(dir.path().join("shot.first.png")).unwrap());
+    assert_eq!((first_shot.width, first_shot.height), (480, 320));
+    let (first, second) = (count_near(&first_shot, FIRST), count_near(&first_shot, SECOND));
+    assert!(first > frame_px * 8 / 10 && second == 0, "first shot: {first} / {second} pixels of {frame_px}");
     let img = decode_png(&bytes);
     assert_eq!((img.width, img.height), (480, 320));
-    // The whole frame is drawn, scaled to fit the window, in the second colour: the stream
-    // replaced the first frames with the newest.
-    let frame_px = (WIDTH * HEIGHT) as usize;
+    // Then the whole frame in the second colour: the stream replaced the first frames with the
+    // newest (the page did not stop at its first part).
     let (first, second) = (count_near(&img, FIRST), count_near(&img, SECOND));
     assert!(second > frame_px * 8 / 10, "newest frame: {second} pixels of {frame_px} (first colour {first})");
     assert!(first < frame_px / 100, "an old frame is still shown: {first} pixels");
