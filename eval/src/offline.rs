@@ -193,6 +193,11 @@ impl Run {
             MissionEvent::RobotPose { end_ns, pose, lio_ms, health } => {
                 if let Some(sc) = self.score.as_mut() {
                     sc.robot_pose(end_ns, &pose, Some(health));
+                    if sc.explored_due(end_ns) {
+                        if let Some(grid) = self.mission.robot().floor_grid() {
+                            sc.explored(end_ns, grid.traversable_area_m2());
+                        }
+                    }
                 }
                 self.robot_tum.push(tum_line(end_ns, &pose));
                 self.slam_ms.push(lio_ms);

@@ -20,6 +20,7 @@ pub struct Report {
     pub alignment: AlignmentReport,
     pub rig_pose_error: PoseErrorReport,
     pub robot_pose_error: RobotPoseErrorReport,
+    pub exploration: ExplorationReport,
     pub latency_ms: LatencyReport,
     pub memory: MemoryReport,
     pub wall_s: f64,
@@ -139,6 +140,18 @@ pub struct MapSightReport {
 pub struct PoseErrorReport {
     pub translation_m: Quantiles,
     pub rotation_deg: Quantiles,
+}
+
+/// The floor the robot's scans made known on its route (docs/explore.md): the traversable area
+/// of its occupancy grid. Offline runs only (the live robot node does not grow the grid yet).
+#[derive(Debug, Serialize)]
+pub struct ExplorationReport {
+    /// Which route: "scripted" (the scenario's waypoints) until the robot explores on its own.
+    pub route: &'static str,
+    /// At the end (NaN, written null, without a grid).
+    pub area_m2: f64,
+    /// (seconds since the robot's first pose, m^2), every 5 s of the robot's time.
+    pub area_by_time: Vec<[f64; 2]>,
 }
 
 /// The robot's LIO poses against its true poses, the LIO world tied to the truth's at the first

@@ -14,11 +14,14 @@ use crate::drift::{drift_stretches, DriftReport, ScoredPose};
 use crate::error::{write, EvalError, Result};
 use crate::map_sight::MapSight;
 use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
+
+/// The explored floor area is sampled this often (robot time).
+const EXPLORED_EVERY_NS: u64 = 5_000_000_000;
 use crate::plots::write_plots;
 use crate::quantiles::quantiles;
 use crate::report::{
-    AlignmentReport, DetectionReport, InlierReport, LatencyReport, MapSightReport, MemoryReport, PoseErrorReport,
-    PosePrecision, PoseRecall, Report, RobotPoseErrorReport,
+    AlignmentReport, DetectionReport, ExplorationReport, InlierReport, LatencyReport, MapSightReport, MemoryReport,
+    PoseErrorReport, PosePrecision, PoseRecall, Report, RobotPoseErrorReport,
 };
 use crate::truth::{at, people_at, CameraFrame, PersonBox, TruePose, Truth};
 use nalgebra::{Isometry3, Vector3};
@@ -86,6 +89,8 @@ pub struct Scorer {
     projected: Vec<ProjectedPoint>,
     /// The robot's newest pose: its detections up to here have all come in.
     robot_ns: Option<u64>,
+    /// (robot time, traversable floor known, m^2), every `EXPLORED_EVERY_NS`.
+    explored: Vec<(u64, f64)>,
     /// Each robot pose's time and error, and the LIO's health when the run reports it.
     robot_series: Vec<(u64, f64, Option<Health>)>,
     detected: DetectedLog,
@@ -128,6 +133,7 @@ impl Scorer {
             ],
             projected: Vec::new(),
             robot_ns: None,
+            explored: Vec::new(),
             robot_series: Vec::new(),
             detected: DetectedLog::default(),
             pending: VecDeque::new(),
@@ -146,6 +152,25 @@ impl Scorer {
         self.robot_series.push((end_ns, m, health));
         self.robot_err_deg.push(deg);
         self.robot_ns = Some(self.robot_ns.map_or(end_ns, |t| t.max(end_ns)));
+    }
+
+    /// Whether the explored area is due at `end_ns` (robot time): every `EXPLORED_EVERY_NS`.
+    pub fn explored_due(&self, end_ns: u64) -> bool {
+        self.explored.last().is_none_or(|(t, _)| end_ns >= t + EXPLORED_EVERY_NS)
+    }
+
+    /// The robot's floor grid knew `area_m2` of traversable floor at `end_ns`.
+    pub fn explored(&mut self, end_ns: u64, area_m2: f64) {
+        self.explored.push((end_ns, area_m2));
+    }
+
+    fn exploration(&self) -> ExplorationReport {
+        let first = self.truth.gt_robot.first().map_or(0, |g| g.0);
+        ExplorationReport {
+            route: "scripted",
+            area_m2: self.explored.last().map_or(f64::NAN, |e| e.1),
+            area_by_time: self.explored.iter().map(|&(t, a)| [t.saturating_sub(first) as f64 * 1e-9, a]).collect(),
+        }
     }
 
     /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
@@ -431,6 +456,7 @@ impl Scorer {
                 rmse_m: rmse(&self.robot_err_m),
                 drift: self.drift(),
             },
+            exploration: self.exploration(),
             latency_ms: latency,
             memory,
             wall_s,

@@ -73,6 +73,14 @@ pub fn summary(r: &Report) -> String {
         e.rotation_deg.p50,
         e.rotation_deg.max
     );
+    let x = &r.exploration;
+    if let Some([t_s, _]) = x.area_by_time.last() {
+        let _ = writeln!(
+            o,
+            "  exploration ({} route): {:.1} m^2 of traversable floor known after {:.0} s",
+            x.route, x.area_m2, t_s
+        );
+    }
     let l = &r.latency_ms;
     let _ = writeln!(
         o,

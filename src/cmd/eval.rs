@@ -12,7 +12,7 @@ use starc_eval::offline::{self, Offline, Start};
 use starc_hil::gen;
 use starc_hil::sim::run::{run as run_sim, SimOptions};
 use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
-use starc_pipeline::mission::RobotCoreConfig;
+use starc_pipeline::mission::{RobotCoreConfig, FLOOR_GRID_RAY_STRIDE};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -292,7 +292,11 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
 }
 
 fn robot_config(args: &Args) -> anyhow::Result<RobotCoreConfig> {
-    let mut cfg = RobotCoreConfig { detect: args.detector.config()?, ..RobotCoreConfig::default() };
+    let mut cfg = RobotCoreConfig {
+        detect: args.detector.config()?,
+        floor_grid_ray_stride: FLOOR_GRID_RAY_STRIDE,
+        ..RobotCoreConfig::default()
+    };
     if let Some(h) = args.walker_min_height_m {
         cfg.walker_min_height_m = h;
     }

@@ -18,7 +18,7 @@
 use starc_eval::offline::{self, Offline, Start};
 use starc_eval::Truth;
 use starc_hil::sim::run::{FPV_AVIA_IP, ROBOT_AVIA_IP};
-use starc_pipeline::mission::RobotCoreConfig;
+use starc_pipeline::mission::{RobotCoreConfig, FLOOR_GRID_RAY_STRIDE};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -86,6 +86,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         robot: RobotCoreConfig {
             walker_min_height_m: args.walker_min_height_m.unwrap_or(RobotCoreConfig::default().walker_min_height_m),
             detect: args.detector.config()?,
+            floor_grid_ray_stride: FLOOR_GRID_RAY_STRIDE,
             ..RobotCoreConfig::default()
         },
         rig_align: super::align::rig_align_config(args.align_config.as_deref())?,

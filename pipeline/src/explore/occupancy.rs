@@ -242,6 +242,12 @@ impl OccupancyGrid {
         }
     }
 
+    /// The floor the base can stand on (traversable cells), square metres.
+    pub fn traversable_area_m2(&self) -> f64 {
+        let n = (0..self.side * self.side).filter(|&k| self.traversable((k % self.side, k / self.side))).count();
+        n as f64 * self.cfg.cell_m * self.cfg.cell_m
+    }
+
     /// Cells known free and occupied, for reports (free, occupied).
     pub fn known(&self) -> (usize, usize) {
         let free = self.log_odds.iter().filter(|&&v| v <= -DECIDED).count();

@@ -31,7 +31,7 @@ pub use rig::{AlignInputs, AlignJob, AlignOutcome, AlignVerdict, RigCore, RigCor
 pub use rig_side::{
     DetectionTake, RefusedDetections, RigSide, RigSideConfig, HOLD_NS, MAX_DETECTION_AGE_NS, MAX_DETECTION_LEAD_NS,
 };
-pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep};
+pub use robot::{RobotCore, RobotCoreConfig, RobotDetection, RobotStep, FLOOR_GRID_RAY_STRIDE};
 pub use robot_map::{MapScan, RobotMap, RobotMapConfig};
 pub use sent_people::{people_to_draw, people_to_send};
 pub use waiting::Waiting;

@@ -10,6 +10,7 @@ use crate::ar::{ArPerson, OrientedBox};
 use crate::detect::{
     make_detector, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose, WindowPoint,
 };
+use crate::explore::{OccupancyConfig, OccupancyGrid};
 use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, WheelFusion, WheelSample};
 use crate::timing::Stopwatch;
 use crate::PipelineError;
@@ -48,6 +49,10 @@ pub struct RobotCoreConfig {
     pub motion_min_baseline_ns: u64,
     /// The clock of the detector's compute time.
     pub stopwatch: Stopwatch,
+    /// An occupancy grid of the floor grown from every placed scan, the ray of every this many
+    /// points (0: none), from the detector's first floor on: what exploration will plan on, and
+    /// the explored floor area the scorer reports (`exploration`, docs/explore.md).
+    pub floor_grid_ray_stride: usize,
 }
 
 /// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
@@ -64,6 +69,9 @@ pub const COVERAGE_RAY_STRIDE: usize = 16;
 pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
+/// The floor grid's ray stride in scored offline runs (`starc mission`, `starc eval`): one ray
+/// in 8 fills a room's floor within a few scans at a few milliseconds a scan.
+pub const FLOOR_GRID_RAY_STRIDE: usize = 8;
 /// The base's ground point in the Avia IMU's frame: the Avia 0.45 m above the floor, level, over
 /// the base's centre (the Avia's IMU sits at (0.04165, 0.02326, -0.0284) m in its LiDAR's
 /// frame). Only the horizontal part matters much: it turns the base's yaw rate into velocity.
@@ -118,6 +126,7 @@ impl Default for RobotCoreConfig {
             motion_span_ns: 500_000_000,
             motion_min_baseline_ns: 200_000_000,
             stopwatch: Stopwatch::Wall,
+            floor_grid_ray_stride: 0,
         }
     }
 }
@@ -156,6 +165,7 @@ pub struct RobotCore {
     map: RobotMap,
     motion: PersonMotion,
     outs: Vec<ScanOutput>,
+    floor_grid: Option<OccupancyGrid>,
 }
 
 impl RobotCore {
@@ -175,6 +185,7 @@ impl RobotCore {
             map: RobotMap::new(cfg.map_config())?,
             motion: PersonMotion::new(cfg.motion_span_ns, cfg.motion_min_baseline_ns),
             outs: Vec::new(),
+            floor_grid: None,
             cfg,
         })
     }
@@ -200,6 +211,7 @@ impl RobotCore {
         let outs = std::mem::take(&mut self.outs);
         for o in outs {
             let placed = Arc::new(self.placer.place(&o));
+            self.grow_floor_grid(&o.lidar_pose.translation.vector, &placed);
             self.unmapped.push(MapScan { origin_m: o.lidar_pose.translation.vector, points: Arc::clone(&placed) });
             self.window.push_back(placed);
             if self.window.len() > self.cfg.detect_scans {
@@ -207,6 +219,30 @@ impl RobotCore {
             }
             let detection = (self.window.len() == self.cfg.detect_scans).then(|| self.detect(&o));
             out.push(RobotStep { output: o, detection });
+        }
+    }
+
+    /// The floor grid (`floor_grid_ray_stride` > 0), once the detector has found a floor.
+    pub fn floor_grid(&self) -> Option<&OccupancyGrid> {
+        self.floor_grid.as_ref()
+    }
+
+    /// Adds a placed scan to the floor grid, made around the sensor at the floor the detector
+    /// found under it the first time it found one.
+    fn grow_floor_grid(&mut self, origin: &Vector3<f64>, placed: &[WindowPoint]) {
+        let stride = self.cfg.floor_grid_ray_stride;
+        if stride == 0 {
+            return;
+        }
+        if self.floor_grid.is_none() {
+            let Some(floor) = self.detector.last_floor() else { return };
+            let floor_z_m = floor.a * origin.x + floor.b * origin.y + floor.c;
+            let cfg = OccupancyConfig { floor_z_m, ..OccupancyConfig::default() };
+            self.floor_grid = OccupancyGrid::new(cfg, [origin.x, origin.y]);
+        }
+        if let Some(grid) = self.floor_grid.as_mut() {
+            let points: Vec<Vector3<f64>> = placed.iter().step_by(stride).map(|p| p.xyz()).collect();
+            grid.add_scan(origin, &points);
         }
     }
 
