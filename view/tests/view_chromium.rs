@@ -17,6 +17,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
+use common::{peer_python, root};
 use starc_pipeline::ar::ArFrame;
 use starc_view::{serve_http, ViewHub, ViewStatus};
 use std::io::{BufRead, BufReader, Write};
@@ -62,11 +65,6 @@ fn publish_until(hub: ViewHub, stop: Arc<AtomicBool>, switched: Arc<AtomicBool>,
     }
 }
 
-/// The workspace root, where .venv and tests/peers live.
-fn root() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
 /// tests/peers/chromium_view.py on `url` in a window of `width` x `height`: a first screenshot
 /// `wait_s` after the page opened, then `switch` is set, then the final screenshot `wait_s`
 /// later (the first beside it, `.first` before the suffix) and the page's status line (text,
@@ -78,14 +76,14 @@ fn chromium_view(
     (width, height): (u32, u32),
     switch: &AtomicBool,
 ) -> (String, String) {
-    let mut child = Command::new(root().join(".venv/bin/python"))
+    let mut child = Command::new(peer_python())
         .arg(root().join("tests/peers/chromium_view.py"))
         .args([url, &shot.display().to_string(), &wait_s.to_string(), &width.to_string(), &height.to_string()])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("running .venv/bin/python (scripts/test.sh sets it up)");
+        .expect("running the peers' python");
     let mut stdin = child.stdin.take().unwrap();
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
     let mut last = String::new();

@@ -4,7 +4,7 @@
 
 use super::font::{draw_text, ADVANCE, GLYPH_H};
 use super::render::person_colour;
-use super::{ArFrame, ArPerson, CameraModel, RenderConfig, NEAR_M};
+use super::{ArFrame, ArPerson, CameraModel, RenderConfig};
 use crate::detect::PersonPose;
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -73,13 +73,13 @@ pub fn draw_people_labels(
         let Some(a) = anchor(p) else { continue };
         let c = camera_t_world.transform_point(&Point3::from(a)).coords;
         let text = label_text(c.norm(), p.pose, p.age_ns, stale_ns);
-        match in_view(camera, &c) {
+        match camera.project(&c) {
             Some((u, v)) => {
                 // Over the person's head where that is in view, else over their middle; and above
                 // their whole box on screen (a lying person seen from above reaches higher in the
                 // image than the top of their box's centre), so the label hides none of them.
                 let head = camera_t_world.transform_point(&Point3::from(top(p, &a))).coords;
-                let (u, v) = in_view(camera, &head).unwrap_or((u, v));
+                let (u, v) = camera.project(&head).unwrap_or((u, v));
                 let v = box_top_px(camera, &camera_t_world, p).map_or(v, |top| top.min(v));
                 let (_, h) = text_size(&text, scale);
                 plate_text(frame, u, v - h - 6.0, scale, &text);
@@ -103,17 +103,9 @@ fn box_top_px(camera: &CameraModel, camera_t_world: &Isometry3<f64>, p: &ArPerso
     let corners = super::box_corners(p.bbox.as_ref()?);
     corners.iter().try_fold(f64::INFINITY, |top, c| {
         let c = camera_t_world.transform_point(&Point3::from(*c)).coords;
-        let (_, v) = if c.z >= NEAR_M { camera.project_unclipped(&c) } else { None }?;
+        let (_, v) = camera.project_unclipped(&c)?;
         Some(top.min(v))
     })
-}
-
-/// The pixel of a camera-frame point, when it lies in front of the camera and inside the frame.
-fn in_view(camera: &CameraModel, c: &Vector3<f64>) -> Option<(f64, f64)> {
-    if c.z < NEAR_M {
-        return None;
-    }
-    camera.project(c)
 }
 
 /// Where the arrow to an out-of-view point sits (just inside the frame's edge) and the unit
@@ -123,7 +115,7 @@ fn edge_point(frame: &ArFrame, camera: &CameraModel, c: &Vector3<f64>) -> ((f64,
     let (cx, cy) = (w / 2.0, h / 2.0);
     // In front: the direction of the projection. Beside or behind (a point behind the camera
     // projects mirrored): its x, y, and the farther behind, the more downward ("turn around").
-    let (mut dx, mut dy) = match (c.z >= NEAR_M).then(|| camera.project_unclipped(c)).flatten() {
+    let (mut dx, mut dy) = match camera.project_unclipped(c) {
         Some((u, v)) => (u - cx, v - cy),
         None => (c.x, c.y.max(0.0) + (-c.z).max(0.0)),
     };

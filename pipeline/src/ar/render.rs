@@ -117,8 +117,8 @@ fn draw_rig_points<'a>(
     cfg: &RenderConfig,
 ) {
     let (w, h) = (frame.width as usize, frame.height as usize);
-    // Depth in millimetres: half the bytes of an f32 buffer, so that a 640 x 480 one stays in
-    // the cache the random accesses of a hash map's points need (the loop is memory-bound).
+    // Depth in millimetres: half the bytes of an f32 buffer, so that more of it stays in the
+    // cache (the loop is memory-bound: points far apart in the list land far apart in it).
     let mut depth = vec![u16::MAX; w * h];
     let r = camera_t_points.rotation.to_rotation_matrix().into_inner();
     let t = camera_t_points.translation.vector;

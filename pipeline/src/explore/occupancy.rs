@@ -172,15 +172,13 @@ impl OccupancyGrid {
             } else {
                 (p.xy(), true)
             };
-            let Some(to) = self.cell_of(end.x, end.y).or_else(|| self.last_inside(from, end.x, end.y)) else {
-                continue;
-            };
+            let to = self.cell_unbounded(end.x, end.y);
             let is_floor = trusted && over_floor.abs() <= self.cfg.max_step_m * 4.0 && !self.blocks(p);
             // A return on the floor or an obstacle ends where it fell; one overhead (a ceiling,
             // a shelf over the robot's head) clears the floor beneath its ray only up to the
             // cell before it, which its ray crossed.
             self.pass_along(from, to, &hit);
-            if let Some(k) = self.index(to).filter(|k| !hit.contains(k)) {
+            if let Some(k) = self.index_unbounded(to).filter(|k| !hit.contains(k)) {
                 if is_floor {
                     self.bump(k, PASS);
                     if let Some(f) = self.floor_m.get_mut(k) {
@@ -192,19 +190,14 @@ impl OccupancyGrid {
         }
     }
 
-    /// The last cell inside the grid on the way from `from` to a point outside it.
-    fn last_inside(&self, from: (usize, usize), x: f64, y: f64) -> Option<(usize, usize)> {
-        let [cx, cy] = self.centre_of(from);
-        let (mut lo, mut hi) = (0.0f64, 1.0f64);
-        for _ in 0..40 {
-            let mid = (lo + hi) / 2.0;
-            if self.cell_of(cx + (x - cx) * mid, cy + (y - cy) * mid).is_some() {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        self.cell_of(cx + (x - cx) * lo, cy + (y - cy) * lo)
+    /// The cell of a finite world point, inside the grid or not (saturating far outside it).
+    fn cell_unbounded(&self, x: f64, y: f64) -> (i64, i64) {
+        let at = |v: f64, o: f64| ((v - o) / self.cfg.cell_m).floor() as i64;
+        (at(x, self.origin_m[0]), at(y, self.origin_m[1]))
+    }
+
+    fn index_unbounded(&self, (i, j): (i64, i64)) -> Option<usize> {
+        self.index((usize::try_from(i).ok()?, usize::try_from(j).ok()?))
     }
 
     /// Whether a return lies in the robot's body band over the floor.
@@ -213,15 +206,16 @@ impl OccupancyGrid {
         over_floor > self.cfg.max_step_m && over_floor < self.cfg.body_height_m
     }
 
-    /// Lowers the log-odds of every cell from `a` up to (not including) `b`, except `hit` ones.
-    fn pass_along(&mut self, a: (usize, usize), b: (usize, usize), hit: &HashSet<usize>) {
+    /// Lowers the log-odds of every cell from `a` (inside the grid) up to (not including) `b`,
+    /// except `hit` ones; a ray leaving the grid stops there (it cannot come back in).
+    fn pass_along(&mut self, a: (usize, usize), (x1, y1): (i64, i64), hit: &HashSet<usize>) {
         let (mut x, mut y) = (a.0 as i64, a.1 as i64);
-        let (x1, y1) = (b.0 as i64, b.1 as i64);
         let (dx, dy) = ((x1 - x).abs(), -(y1 - y).abs());
         let (sx, sy) = (if x < x1 { 1 } else { -1 }, if y < y1 { 1 } else { -1 });
         let mut err = dx + dy;
         while (x, y) != (x1, y1) {
-            if let Some(k) = self.index((x as usize, y as usize)).filter(|k| !hit.contains(k)) {
+            let Some(k) = self.index_unbounded((x, y)) else { break };
+            if !hit.contains(&k) {
                 self.bump(k, PASS);
             }
             let e2 = 2 * err;

@@ -33,34 +33,35 @@ pub fn usable(grid: &OccupancyGrid, robot: (usize, usize), robot_radius_m: f64) 
     let side = grid.side();
     let cell_m = grid.config().cell_m;
     let r = (robot_radius_m / cell_m).ceil() as i64;
-    let mut ok: Vec<bool> = (0..side * side).map(|k| grid.traversable((k % side, k / side))).collect();
-    let near = |c: (usize, usize), d: i64| {
-        (c.0 as i64 - robot.0 as i64).abs() <= d && (c.1 as i64 - robot.1 as i64).abs() <= d
+    // The cells within the radius of a cell, as offsets.
+    let disc: Vec<(i64, i64)> = (-r..=r)
+        .flat_map(|dj| (-r..=r).map(move |di| (di, dj)))
+        .filter(|&(di, dj)| ((di * di + dj * dj) as f64).sqrt() * cell_m <= robot_radius_m)
+        .collect();
+    let around = |(i, j): (usize, usize), offsets: &[(i64, i64)]| {
+        offsets
+            .iter()
+            .map(move |&(di, dj)| (i as i64 + di, j as i64 + dj))
+            .filter(|&(x, y)| (0..side as i64).contains(&x) && (0..side as i64).contains(&y))
+            .map(|(x, y)| (x as usize, y as usize))
+            .collect::<Vec<_>>()
     };
-    for (k, slot) in ok.iter_mut().enumerate() {
-        let c = (k % side, k / side);
-        if near(c, r) && grid.cell(c) != Cell::Occupied {
+    let mut ok: Vec<bool> = (0..side * side).map(|k| grid.traversable((k % side, k / side))).collect();
+    let square: Vec<(i64, i64)> = (-r..=r).flat_map(|dj| (-r..=r).map(move |di| (di, dj))).collect();
+    for c in around(robot, &square).into_iter().filter(|&c| grid.cell(c) != Cell::Occupied) {
+        if let Some(slot) = ok.get_mut(c.1 * side + c.0) {
             *slot = true;
         }
     }
     // Keep the radius from every occupied cell.
-    for j in 0..side {
-        for i in 0..side {
-            if grid.cell((i, j)) != Cell::Occupied {
-                continue;
-            }
-            for dj in -r..=r {
-                for di in -r..=r {
-                    if ((di * di + dj * dj) as f64).sqrt() * cell_m > robot_radius_m {
-                        continue;
-                    }
-                    let (x, y) = (i as i64 + di, j as i64 + dj);
-                    if (0..side as i64).contains(&x) && (0..side as i64).contains(&y) {
-                        if let Some(slot) = ok.get_mut(y as usize * side + x as usize) {
-                            *slot = false;
-                        }
-                    }
-                }
+    for k in 0..side * side {
+        let c = (k % side, k / side);
+        if grid.cell(c) != Cell::Occupied {
+            continue;
+        }
+        for (x, y) in around(c, &disc) {
+            if let Some(slot) = ok.get_mut(y * side + x) {
+                *slot = false;
             }
         }
     }

@@ -149,6 +149,11 @@ fn bad_points_and_places_outside_the_grid_do_nothing_bad() {
     assert!(OccupancyGrid::new(OccupancyConfig { cell_m: 0.0, ..OccupancyConfig::default() }, [0.0, 0.0]).is_none());
     assert!(OccupancyGrid::new(OccupancyConfig { extent_m: 1e9, ..OccupancyConfig::default() }, [0.0, 0.0]).is_none());
     assert_eq!(g.cell((usize::MAX, 0)), Cell::Unknown);
+    // Rays that would run for kilometres stop at the grid's edge.
+    let cfg = OccupancyConfig { extent_m: 20.0, max_range_m: 1e12, ..OccupancyConfig::default() };
+    let mut far = OccupancyGrid::new(cfg, [3.0, 2.0]).unwrap();
+    far.add_scan(&Vector3::new(1.0, 2.0, 0.5), &[Vector3::new(1e9, 2.0, 0.0)]);
+    assert_eq!(far.cell(at(&far, 12.5, 2.0)), Cell::Unknown, "one pass is not enough to decide");
 }
 
 /// The room with its doorway `door_m` wide (centred on y = 2), seen from (1, 2).

@@ -14,7 +14,7 @@ mod offline;
 mod overlay;
 mod person_motion;
 mod place;
-pub mod recent_voxels;
+mod recent_voxels;
 mod rig;
 mod rig_history;
 mod rig_side;

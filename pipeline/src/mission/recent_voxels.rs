@@ -5,10 +5,10 @@
 //! return, bounds the cost.
 
 use crate::voxel_hash::{key_of, Key, KeyMap};
+use nalgebra::Vector3;
 
 /// [`RecentVoxels::points_by_block`]'s blocks: 2^4 = 16 voxels a side.
 const BLOCK_SHIFT: i32 = 4;
-use nalgebra::Vector3;
 
 pub struct RecentVoxels {
     inv_voxel_m: f64,
@@ -45,7 +45,7 @@ impl RecentVoxels {
         cells.into_iter().map(|c| c.1).collect()
     }
 
-    /// The kept points grouped by block of `BLOCK` voxels a side (about 1.3 m at 8 cm), blocks
+    /// The kept points grouped by block of 2^`BLOCK_SHIFT` voxels a side (about 1.3 m at 8 cm), blocks
     /// in grid order, into `out`: drawn in this order, consecutive points land near each other
     /// on screen and in the depth buffer (in the hash map's order every point is a cache miss
     /// there). A counting sort, linear in the points: cheap enough to run after every scan.
@@ -95,12 +95,9 @@ impl RecentVoxels {
         }
     }
 
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    fn len(&self) -> usize {
         self.voxels.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.voxels.is_empty()
     }
 }
 

@@ -496,11 +496,12 @@ impl RigCore {
     }
 
     fn drain(&mut self, out: &mut Vec<ScanOutput>) {
-        for o in std::mem::take(&mut self.outs) {
+        let outs = std::mem::take(&mut self.outs);
+        let new_view = !outs.is_empty();
+        for o in outs {
             let placed = self.placer.place(&o);
             let points: Vec<Vector3<f64>> = placed.iter().map(|p| p.xyz()).collect();
             self.view.add(&points, o.end_ns);
-            self.view.points_by_block(&mut self.view_sorted);
             let _ = self.world.push_odometry(o.end_ns, o.lidar_pose);
             let _ = self.odom.push(o.end_ns, o.lidar_pose);
             if self.first_ns.is_none() {
@@ -511,6 +512,10 @@ impl RigCore {
                 self.scans.pop_front();
             }
             out.push(o);
+        }
+        // Reordered once per batch of scans, after all of them are in.
+        if new_view {
+            self.view.points_by_block(&mut self.view_sorted);
         }
     }
 

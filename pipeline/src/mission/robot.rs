@@ -236,7 +236,8 @@ impl RobotCore {
         }
         if self.floor_grid.is_none() {
             let Some(floor) = self.detector.last_floor() else { return };
-            let floor_z_m = floor.a * origin.x + floor.b * origin.y + floor.c;
+            // The floor's height under the sensor: a point at z = 0 there is this far above it.
+            let floor_z_m = -floor.height(origin.x, origin.y, 0.0);
             let cfg = OccupancyConfig { floor_z_m, ..OccupancyConfig::default() };
             self.floor_grid = OccupancyGrid::new(cfg, [origin.x, origin.y]);
         }
