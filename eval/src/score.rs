@@ -173,6 +173,18 @@ impl Scorer {
         }
     }
 
+    /// Per robot scan: time since the first, pose error against the truth and the LIO's health
+    /// (empty where the run did not report it), for finding where an odometry went wrong.
+    fn robot_error_csv(&self) -> String {
+        let first = self.robot_series.first().map_or(0, |r| r.0);
+        let mut csv = String::from("time_s,error_m,error_deg,health\n");
+        for (&(t_ns, m, health), deg) in self.robot_series.iter().zip(&self.robot_err_deg) {
+            let health = health.map_or("", Health::name);
+            csv += &format!("{:.3},{m:.4},{deg:.3},{health}\n", t_ns.saturating_sub(first) as f64 * 1e-9);
+        }
+        csv
+    }
+
     /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
     fn drift(&self) -> Option<DriftReport> {
         let poses: Vec<ScoredPose> = self
@@ -463,6 +475,7 @@ impl Scorer {
         };
         report.write(&out.join("report.json"))?;
         write(&out.join("frames.csv"), self.frame_rows.join("\n") + "\n")?;
+        write(&out.join("robot_error.csv"), self.robot_error_csv())?;
         write_plots(out, &self.err_series, &self.inlier_series, total_ms)?;
         Ok(report)
     }
@@ -561,6 +574,12 @@ mod tests {
             assert!(json.pointer(&format!("/robot_pose_error/{key}")).is_some_and(|v| v.is_f64()), "{key}");
         }
         assert!(json.pointer("/rig_pose_error/translation_m").is_some(), "the rig's key stays");
+        let csv = std::fs::read_to_string(out.path().join("robot_error.csv")).unwrap();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 21, "a header and one row per pose");
+        assert_eq!(lines[0], "time_s,error_m,error_deg,health");
+        assert_eq!(lines[1], "0.000,0.0000,0.000,", "no health reported: the field stays empty");
+        assert_eq!(lines[20], "9.500,0.0500,2.000,");
     }
 
     /// A rig scan of a wall 3 m ahead of the LiDAR (x forward), 200 returns at `t_ns`.
