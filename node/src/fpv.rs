@@ -394,6 +394,11 @@ impl RigNode {
             };
             let _ = fox.publish_msg(Topic::ArImage.name(), t_ns, &msg);
         }
+        // A redraw repeats the last frame's stamp: the live views take it, the recording and
+        // ROS 2 (which would get two frames at one time) do not.
+        if !new_data {
+            return;
+        }
         if let Some(b) = self.ros2.as_mut() {
             b.ar_frame(t_ns, snapshot.clone());
         }

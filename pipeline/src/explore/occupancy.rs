@@ -9,8 +9,8 @@
 //! each return (Bresenham) and clear the cells they cross: the robot's LiDAR looked through
 //! them. Ceilings and the floor's own returns clear nothing past themselves.
 
+use crate::voxel_hash::VoxelHashSet;
 use nalgebra::Vector3;
-use std::collections::HashSet;
 
 /// Log-odds added per hit and per pass, and their bounds: a cell seen free many times takes a
 /// few hits to turn occupied (a person walking through), and the other way round.
@@ -145,7 +145,7 @@ impl OccupancyGrid {
     /// floor at a wall's foot shares its cell).
     pub fn add_scan<'a>(&mut self, origin: &Vector3<f64>, points: impl IntoIterator<Item = &'a Vector3<f64>> + Clone) {
         let Some(from) = self.cell_of(origin.x, origin.y) else { return };
-        let hit: HashSet<usize> = points
+        let hit: VoxelHashSet<usize> = points
             .clone()
             .into_iter()
             .filter(|p| {
@@ -208,7 +208,7 @@ impl OccupancyGrid {
 
     /// Lowers the log-odds of every cell from `a` (inside the grid) up to (not including) `b`,
     /// except `hit` ones; a ray leaving the grid stops there (it cannot come back in).
-    fn pass_along(&mut self, a: (usize, usize), (x1, y1): (i64, i64), hit: &HashSet<usize>) {
+    fn pass_along(&mut self, a: (usize, usize), (x1, y1): (i64, i64), hit: &VoxelHashSet<usize>) {
         let (mut x, mut y) = (a.0 as i64, a.1 as i64);
         let (dx, dy) = ((x1 - x).abs(), -(y1 - y).abs());
         let (sx, sy) = (if x < x1 { 1 } else { -1 }, if y < y1 { 1 } else { -1 });

@@ -80,11 +80,9 @@ impl Overlay {
                 let age_ns = t_ns - s.stamp_ns;
                 let speed = self.speed_mps(s.stamp_ns, &b.centre_m);
                 let walking = b.size_m.z >= WALKER_MIN_HEIGHT_M && speed >= WALKING_MPS;
-                if walking && speed * age_ns as f64 * 1e-9 > MAX_DRIFT_M {
-                    out.push(ArPerson { age_ns, points_world: Vec::new(), ..p.clone() });
-                } else {
-                    out.push(ArPerson { age_ns, ..p.clone() });
-                }
+                let drifted = walking && speed * age_ns as f64 * 1e-9 > MAX_DRIFT_M;
+                let points_world = if drifted { Vec::new() } else { p.points_world.clone() };
+                out.push(ArPerson { points_world, bbox: p.bbox, age_ns, pose: p.pose });
             }
         }
         out
