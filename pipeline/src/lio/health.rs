@@ -27,6 +27,12 @@ pub struct HealthConfig {
     /// After refusing scans for this long the filter is lost: the next scans are matched with a
     /// wider search and an inflated covariance until one is accepted.
     pub max_ride_s: f64,
+    /// A filter lost only for want of matches (blind: a wall inside the minimum range, a turn
+    /// in place) while the base's wheels measure widens its search and uncertainty as one whose
+    /// scans contradicted it. false: nothing contradicted its prediction and the wheels and gyro
+    /// carried it, so the uncertainty it propagated is the honest one; widened, the few matches
+    /// of the first scan back move it as far as they like. Without wheels it always widens.
+    pub blind_ride_widens: bool,
 }
 
 impl Default for HealthConfig {
@@ -38,6 +44,7 @@ impl Default for HealthConfig {
             max_correction_m: 0.3,
             max_correction_deg: 5.0,
             max_ride_s: 1.0,
+            blind_ride_widens: false,
         }
     }
 }
@@ -150,6 +157,8 @@ pub struct ScanFit {
 pub struct HealthMonitor {
     refusing_since_ns: Option<u64>,
     lost: bool,
+    /// A scan of the current run of refusals was refused for what it said (not for silence).
+    contradicted: bool,
     pub scans_refused: u64,
     pub times_lost: u64,
 }
@@ -158,6 +167,12 @@ impl HealthMonitor {
     /// Whether the next update should search wider (the filter is lost).
     pub fn is_lost(&self) -> bool {
         self.lost
+    }
+
+    /// Whether the current run of refusals holds one refused for what it said (a residual, a
+    /// correction, a poor fit) rather than only for too few matches.
+    pub fn contradicted(&self) -> bool {
+        self.contradicted
     }
 
     /// Judges one scan's update.
@@ -175,7 +190,8 @@ impl HealthMonitor {
         } else {
             None
         };
-        if refused.is_some() {
+        if let Some(why) = refused {
+            self.contradicted |= why != Refusal::TooFewMatches;
             self.scans_refused += 1;
             let since = *self.refusing_since_ns.get_or_insert(end_ns);
             if !self.lost && end_ns.saturating_sub(since) as f64 * 1e-9 >= cfg.max_ride_s {
@@ -187,6 +203,7 @@ impl HealthMonitor {
         }
         self.refusing_since_ns = None;
         self.lost = false;
+        self.contradicted = false;
         let health = if fit.weak_directions > 0 { Health::Degenerate } else { Health::Tracking };
         Verdict { health, refused: None }
     }
@@ -228,5 +245,24 @@ mod tests {
         assert_eq!(m.judge(&cfg, 1_300_000_000, &poor).refused, Some(Refusal::PoorFit));
         let new_space = ScanFit { converged: true, ..poor };
         assert_eq!(m.judge(&cfg, 1_400_000_000, &new_space).refused, None);
+    }
+
+    #[test]
+    fn only_a_refusal_for_what_the_scan_said_contradicts_the_prediction() {
+        let cfg = HealthConfig::default();
+        let mut m = HealthMonitor::default();
+        let silent = ScanFit { matched: 5, used: 40, converged: true, ..ScanFit::default() };
+        for k in 0..15 {
+            m.judge(&cfg, k * 100_000_000, &silent);
+        }
+        assert!(m.is_lost() && !m.contradicted(), "a blind ride is lost but not contradicted");
+        let off = ScanFit { matched: 300, used: 400, converged: true, rms_m: 0.5, ..ScanFit::default() };
+        m.judge(&cfg, 1_600_000_000, &off);
+        assert!(m.contradicted());
+        m.judge(&cfg, 1_700_000_000, &silent);
+        assert!(m.contradicted(), "stays contradicted until a scan is accepted");
+        let good = ScanFit { matched: 300, used: 400, converged: true, rms_m: 0.02, ..ScanFit::default() };
+        assert_eq!(m.judge(&cfg, 1_800_000_000, &good).refused, None);
+        assert!(!m.is_lost() && !m.contradicted());
     }
 }

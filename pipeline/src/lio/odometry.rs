@@ -366,12 +366,14 @@ impl Lio {
         thin_out(&mut used, self.cfg.max_points);
         let (mut report, mut verdict) = (UpdateReport::default(), None);
         if !self.map.is_empty() {
-            if self.monitor.is_lost() {
+            let search_wide = self.monitor.is_lost()
+                && (self.cfg.health.blind_ride_widens || self.monitor.contradicted() || wheel != WheelUse::Applied);
+            if search_wide {
                 self.widen_uncertainty();
             }
             let (prior, prior_cov) = (self.state.clone(), self.cov);
             let mut cfg = self.cfg.update;
-            if self.monitor.is_lost() {
+            if search_wide {
                 cfg.max_neighbour_dist_m *= 3.0;
                 cfg.max_iterations *= 3;
             }
