@@ -77,6 +77,12 @@ fn starc_lio_writes_trajectories_maps_and_timing_that_evo_scores() {
     let rows: Vec<&str> = table.lines().skip(1).collect();
     let applied = rows.iter().filter(|r| r.split(',').nth(14) == Some("applied")).count();
     assert!(rows.len() > 50 && applied * 10 >= rows.len() * 9, "{applied} of {} scans used the wheels", rows.len());
+    // ... and measures its tilt from the accelerometer less the wheels on those scans, gating few.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(wheeled.join("lio.json")).unwrap()).unwrap();
+    let robot = &summary["devices"][0];
+    let (levelled, gated) = (robot["level_updates"].as_u64().unwrap(), robot["level_gated"].as_u64().unwrap());
+    assert!(levelled * 10 >= applied as u64 * 9 && gated * 20 <= applied as u64, "{levelled} levelled, {gated} gated");
     // Without --base-config the wheels cannot be read: a clear error.
     let refused = starc()
         .arg("lio")

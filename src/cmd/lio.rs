@@ -203,6 +203,9 @@ struct DeviceSummary {
     health: BTreeMap<&'static str, u64>,
     scans_refused: u64,
     times_lost: u64,
+    /// Scans whose tilt was measured from the accelerometer less the wheels, and those gated.
+    level_updates: u64,
+    level_gated: u64,
     time_per_scan_ms_median: f64,
     time_per_scan_ms_p99: f64,
     time_per_scan_ms_max: f64,
@@ -463,6 +466,7 @@ fn finish(dev: &mut DeviceRun, out: &Path) -> anyhow::Result<DeviceSummary> {
         health.insert(h.name(), dev.outputs.iter().filter(|o| o.health == h).count() as u64);
     }
     let (scans_refused, times_lost) = dev.lio.health_counts();
+    let (level_updates, level_gated) = dev.lio.level_counts();
     let status = match dev.lio.status() {
         LioStatus::Running => "running".to_string(),
         LioStatus::Initializing(InitStatus::MotionDetected { restarts }) => {
@@ -480,6 +484,8 @@ fn finish(dev: &mut DeviceRun, out: &Path) -> anyhow::Result<DeviceSummary> {
         health,
         scans_refused,
         times_lost,
+        level_updates,
+        level_gated,
         time_per_scan_ms_median: quantile_ms(&times, 0.5),
         time_per_scan_ms_p99: quantile_ms(&times, 0.99),
         time_per_scan_ms_max: quantile_ms(&times, 1.0),
@@ -516,6 +522,13 @@ fn report(s: &Summary) -> String {
         );
         let h: Vec<String> = d.health.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = writeln!(o, "    health: {}; refused {}, lost {} times", h.join(", "), d.scans_refused, d.times_lost);
+        if d.level_updates + d.level_gated > 0 {
+            let _ = writeln!(
+                o,
+                "    tilt from the accelerometer less the wheels: {} scans, {} gated",
+                d.level_updates, d.level_gated
+            );
+        }
     }
     o
 }

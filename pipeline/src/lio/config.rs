@@ -109,6 +109,10 @@ pub struct WheelsSection {
     /// which a measurement is not used: slip, a wheel in the air.
     pub huber_k: f64,
     pub gate_chi2: f64,
+    /// Noise (1 sigma, per axis, m/s²) of the tilt measured once per scan from the
+    /// accelerometer's mean less the base's acceleration from the wheels (`lio::level`); 0: not
+    /// measured. Default 0.1.
+    pub level_sigma_m_s2: f64,
 }
 
 impl Default for WheelsSection {
@@ -123,6 +127,7 @@ impl Default for WheelsSection {
             window_ms: w.window_ns as f64 * 1e-6,
             huber_k: w.huber_k,
             gate_chi2: w.gate_chi2,
+            level_sigma_m_s2: w.level_sigma_m_s2,
         }
     }
 }
@@ -140,8 +145,10 @@ impl WheelsSection {
                 return Err(format!("{name} must be a positive number, not {v}"));
             }
         }
-        if !(self.sigma_rel.is_finite() && self.sigma_rel >= 0.0) {
-            return Err(format!("wheels.sigma_rel must be 0 or more, not {}", self.sigma_rel));
+        for (name, v) in [("wheels.sigma_rel", self.sigma_rel), ("wheels.level_sigma_m_s2", self.level_sigma_m_s2)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be 0 or more, not {v}"));
+            }
         }
         let [r, p, y] = self.rotation_rpy_deg.map(f64::to_radians);
         Ok(WheelFusion {
@@ -153,6 +160,7 @@ impl WheelsSection {
             window_ns: (self.window_ms * 1e6) as u64,
             huber_k: self.huber_k,
             gate_chi2: self.gate_chi2,
+            level_sigma_m_s2: self.level_sigma_m_s2,
         })
     }
 }

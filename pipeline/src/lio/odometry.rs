@@ -4,6 +4,7 @@ use super::deskew::deskew;
 use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::ivox::VoxelMap;
+use super::level::{level_update, LevelWindow};
 use super::propagate::{step, ImuNoise, Knot};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::still::{zero_velocity_update, StillWindow};
@@ -129,6 +130,10 @@ pub struct Lio {
     deskewed: Vec<Vector3<f64>>,
     /// Wheel samples not yet older than the newest scan's window.
     wheels: VecDeque<WheelSample>,
+    /// The accelerometer and the wheels since the last scan (the tilt's measurement).
+    level: LevelWindow,
+    /// Scans whose tilt was measured (accelerometer less the wheels), and those gated.
+    level_updates: (u64, u64),
     /// The clock of the first input; inputs on any other are refused and counted.
     clock: Option<Clock>,
     other_clock_inputs: u64,
@@ -171,6 +176,8 @@ impl Lio {
             knots: Vec::new(),
             deskewed: Vec::new(),
             wheels: VecDeque::new(),
+            level: LevelWindow::default(),
+            level_updates: (0, 0),
             clock: None,
             other_clock_inputs: 0,
             non_finite_inputs: 0,
@@ -338,6 +345,7 @@ impl Lio {
             self.advance(s.t_ns);
             self.held = Some(s);
             self.still.push(&s);
+            self.level.push_acc(&s.acc_m_s2);
             self.imu.pop_front();
         }
         self.advance(t_ns);
@@ -452,8 +460,34 @@ impl Lio {
         while self.wheels.front().is_some_and(|s| s.t_ns + window_ns <= end_ns) {
             self.wheels.pop_front();
         }
+        let level = self.level.take(twist);
         let (Some(twist), Some(held)) = (twist, self.held) else { return WheelUse::None };
-        wheel_update(&mut self.state, &mut self.cov, &held.gyro_rad_s, &twist, &self.cfg.wheel)
+        let used = wheel_update(&mut self.state, &mut self.cov, &held.gyro_rad_s, &twist, &self.cfg.wheel);
+        if let (WheelUse::Applied, Some((mean_acc, acc_base))) = (used, level) {
+            self.level_step(&mean_acc, &acc_base);
+        }
+        used
+    }
+
+    /// The tilt from the accelerometer's mean less the base's acceleration ([`super::level`]),
+    /// where the wheels were just applied (they vouch for the base's acceleration).
+    fn level_step(&mut self, mean_acc_m_s2: &Vector3<f64>, acc_base_m_s2: &Vector3<f64>) {
+        let w = &self.cfg.wheel;
+        if w.level_sigma_m_s2 <= 0.0 {
+            return;
+        }
+        let (state, cov) = (&mut self.state, &mut self.cov);
+        if level_update(state, cov, mean_acc_m_s2, acc_base_m_s2, &w.rot_imu_base, w.level_sigma_m_s2, w.gate_chi2) {
+            self.level_updates.0 += 1;
+        } else {
+            self.level_updates.1 += 1;
+        }
+    }
+
+    /// Scans whose tilt was measured from the accelerometer less the wheels, and those whose
+    /// measurement failed the gate.
+    pub fn level_counts(&self) -> (u64, u64) {
+        self.level_updates
     }
 
     /// A lost filter no longer trusts its position, velocity or heading much: widen them so the

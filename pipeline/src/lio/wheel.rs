@@ -43,6 +43,10 @@ pub struct WheelFusion {
     pub huber_k: f64,
     /// A measurement whose squared Mahalanobis innovation exceeds this is not used.
     pub gate_chi2: f64,
+    /// Noise (1 sigma, per axis) of the tilt measured by the accelerometer less the wheels'
+    /// acceleration, once per scan ([`super::level`]); 0: not measured. 0.1 m/s² (about 0.6 deg
+    /// per scan) chosen on development buildings (docs/lio.md, "The robot's tilt").
+    pub level_sigma_m_s2: f64,
 }
 
 impl Default for WheelFusion {
@@ -56,6 +60,7 @@ impl Default for WheelFusion {
             window_ns: 30_000_000,
             huber_k: 2.0,
             gate_chi2: 30.0,
+            level_sigma_m_s2: 0.1,
         }
     }
 }
