@@ -75,6 +75,13 @@ fn eval_writes_rows_a_summary_and_plots() {
     assert_eq!(eval["summary"][family]["buildings"], 1);
     let building = out.join(format!("{family}-17"));
     assert!(building.join("plan.svg").exists() && building.join("mission/report.json").exists());
+    // No silent drift: every stretch where the robot's pose error grew by more than 10 cm within
+    // 5 s was flagged by the LIO's health (the odometry issue's health test, on a generated
+    // building).
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(building.join("mission/report.json")).unwrap()).unwrap();
+    let drift = &report["robot_pose_error"]["drift"];
+    assert_eq!(drift["silent"], 0, "{drift}");
     assert!(!building.join("avia.pcap").exists(), "the pcap is removed without --keep");
     assert!(std::fs::read_dir(out.join("plots")).unwrap().count() >= 3);
     let (ok, text) = starc(&["eval", "--seeds", "998..1001", "--offline", "--out", out.to_str().unwrap()]);
