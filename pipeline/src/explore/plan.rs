@@ -38,17 +38,9 @@ pub fn usable(grid: &OccupancyGrid, robot: (usize, usize), robot_radius_m: f64) 
         .flat_map(|dj| (-r..=r).map(move |di| (di, dj)))
         .filter(|&(di, dj)| ((di * di + dj * dj) as f64).sqrt() * cell_m <= robot_radius_m)
         .collect();
-    let around = |(i, j): (usize, usize), offsets: &[(i64, i64)]| {
-        offsets
-            .iter()
-            .map(move |&(di, dj)| (i as i64 + di, j as i64 + dj))
-            .filter(|&(x, y)| (0..side as i64).contains(&x) && (0..side as i64).contains(&y))
-            .map(|(x, y)| (x as usize, y as usize))
-            .collect::<Vec<_>>()
-    };
     let mut ok: Vec<bool> = (0..side * side).map(|k| grid.traversable((k % side, k / side))).collect();
     let square: Vec<(i64, i64)> = (-r..=r).flat_map(|dj| (-r..=r).map(move |di| (di, dj))).collect();
-    for c in around(robot, &square).into_iter().filter(|&c| grid.cell(c) != Cell::Occupied) {
+    for c in around(side, robot, &square).filter(|&c| grid.cell(c) != Cell::Occupied) {
         if let Some(slot) = ok.get_mut(c.1 * side + c.0) {
             *slot = true;
         }
@@ -59,13 +51,23 @@ pub fn usable(grid: &OccupancyGrid, robot: (usize, usize), robot_radius_m: f64) 
         if grid.cell(c) != Cell::Occupied {
             continue;
         }
-        for (x, y) in around(c, &disc) {
+        for (x, y) in around(side, c, &disc) {
             if let Some(slot) = ok.get_mut(y * side + x) {
                 *slot = false;
             }
         }
     }
     ok
+}
+
+/// The cells at `offsets` from `(i, j)` that lie inside a grid `side` cells a side.
+fn around(side: usize, (i, j): (usize, usize), offsets: &[(i64, i64)]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    let inside = move |v: i64| (0..side as i64).contains(&v);
+    offsets
+        .iter()
+        .map(move |&(di, dj)| (i as i64 + di, j as i64 + dj))
+        .filter(move |&(x, y)| inside(x) && inside(y))
+        .map(|(x, y)| (x as usize, y as usize))
 }
 
 /// Travel costs (metres) from `start` over the usable cells, and each cell's predecessor on its

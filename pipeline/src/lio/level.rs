@@ -12,10 +12,11 @@
 //! `R = R̂ exp(δθ)`, `∂(-Rᵀg)/∂δθ = -[Rᵀg]×`, `∂h/∂b_a = I`, `∂h/∂g = -Rᵀ`. The lever arm from the
 //! base's centre to the IMU (`ω × (ω × p)`, 0.04 m/s² at 1 rad/s and 4 cm) is left out.
 
+use super::kalman::{update3, Rows3};
 use super::so3::skew;
-use super::state::{Cov, State, BA, DIM, GRAV, ROT};
+use super::state::{Cov, State, BA, GRAV, ROT};
 use super::wheel::WheelSample;
-use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// The accelerometer's samples since the last scan and the wheels' twist at the last scan: what
 /// one level measurement needs.
@@ -74,20 +75,12 @@ pub fn level_update(
     let g_imu = rot_t * state.gravity;
     let predicted_f = rot_imu_base * acc_base_m_s2 - g_imu + state.bias_acc;
     let innovation = mean_acc_m_s2 - predicted_f;
-    let mut h = SMatrix::<f64, 3, DIM>::zeros();
+    let mut h = Rows3::zeros();
     h.fixed_view_mut::<3, 3>(0, ROT).copy_from(&(-skew(&g_imu)));
     h.fixed_view_mut::<3, 3>(0, BA).copy_from(&Matrix3::identity());
     h.fixed_view_mut::<3, 3>(0, GRAV).copy_from(&(-rot_t.matrix()));
     let r = Matrix3::identity() * (sigma_m_s2 * sigma_m_s2);
-    let Some(s_inv) = (h * *cov * h.transpose() + r).try_inverse() else { return false };
-    if (innovation.transpose() * s_inv * innovation)[(0, 0)] > gate_chi2 {
-        return false;
-    }
-    let gain = *cov * h.transpose() * s_inv;
-    *state = state.boxplus(&(gain * innovation));
-    let a = Cov::identity() - gain * h;
-    *cov = a * *cov * a.transpose() + gain * r * gain.transpose();
-    true
+    update3(state, cov, &h, &innovation, &r, gate_chi2)
 }
 
 #[cfg(test)]

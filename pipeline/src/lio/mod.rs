@@ -12,6 +12,7 @@ mod deskew;
 mod health;
 mod init;
 mod ivox;
+mod kalman;
 mod level;
 mod odometry;
 mod plane;

@@ -12,9 +12,10 @@
 //! velocity that had run past the gate was never stopped again, 8.2 m in development flat-5.)
 
 use super::init::spread;
+use super::kalman::{update3, Rows3};
 use super::state::{Cov, State, VEL};
 use super::types::ImuSample;
-use nalgebra::{Matrix3, SMatrix};
+use nalgebra::Matrix3;
 use std::collections::VecDeque;
 
 /// The IMU's last `window_ns`, and whether it was still over all of it.
@@ -58,17 +59,10 @@ impl StillWindow {
 /// One Kalman update of `state`/`cov` with a world velocity of zero, `sigma_m_s` on each axis.
 /// Returns false (nothing changed) when the innovation covariance cannot be inverted.
 pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) -> bool {
-    let mut h = SMatrix::<f64, 3, { super::state::DIM }>::zeros();
+    let mut h = Rows3::zeros();
     h.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
     let r = Matrix3::identity() * (sigma_m_s * sigma_m_s);
-    let Some(s_inv) = (h * *cov * h.transpose() + r).try_inverse() else { return false };
-    let gain = *cov * h.transpose() * s_inv;
-    let innovation = -state.vel;
-    *state = state.boxplus(&(gain * innovation));
-    // Joseph form, as the wheels' update.
-    let a = Cov::identity() - gain * h;
-    *cov = a * *cov * a.transpose() + gain * r * gain.transpose();
-    true
+    update3(state, cov, &h, &-state.vel, &r, f64::INFINITY)
 }
 
 #[cfg(test)]

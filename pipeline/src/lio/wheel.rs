@@ -12,9 +12,10 @@
 //! normalised innovation, and a sample whose whole innovation fails a chi-square gate is not
 //! used at all (counted).
 
+use super::kalman::{update3, Rows3};
 use super::so3::skew;
-use super::state::{Cov, State, BG, DIM, ROT, VEL};
-use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
+use super::state::{Cov, State, BG, ROT, VEL};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// The base's planar twist at one time, on the LiDAR's clock (x forward, y left, z up).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -115,7 +116,7 @@ pub fn wheel_update(
     let v_imu = rot_t * state.vel;
     let z = Vector3::new(twist.vx_m_s, twist.vy_m_s, 0.0);
     let innovation = z - base_from_imu * (v_imu + omega.cross(&cfg.pos_imu_base));
-    let mut h = SMatrix::<f64, 3, DIM>::zeros();
+    let mut h = Rows3::zeros();
     h.fixed_view_mut::<3, 3>(0, ROT).copy_from(&(base_from_imu.matrix() * skew(&v_imu)));
     h.fixed_view_mut::<3, 3>(0, VEL).copy_from((base_from_imu * rot_t).matrix());
     h.fixed_view_mut::<3, 3>(0, BG).copy_from(&(base_from_imu.matrix() * skew(&cfg.pos_imu_base)));
@@ -128,17 +129,11 @@ pub fn wheel_update(
             noise[i] *= e / cfg.huber_k;
         }
     }
-    let r = Matrix3::from_diagonal(&noise);
-    let Some(s_inv) = (predicted + r).try_inverse() else { return WheelUse::Gated };
-    if (innovation.transpose() * s_inv * innovation)[(0, 0)] > cfg.gate_chi2 {
-        return WheelUse::Gated;
+    if update3(state, cov, &h, &innovation, &Matrix3::from_diagonal(&noise), cfg.gate_chi2) {
+        WheelUse::Applied
+    } else {
+        WheelUse::Gated
     }
-    let gain = *cov * h.transpose() * s_inv;
-    *state = state.boxplus(&(gain * innovation));
-    // Joseph form: stays symmetric and positive with the inflated noise.
-    let a = Cov::identity() - gain * h;
-    *cov = a * *cov * a.transpose() + gain * r * gain.transpose();
-    WheelUse::Applied
 }
 
 #[cfg(test)]
