@@ -69,6 +69,12 @@ pub const COVERAGE_RAY_STRIDE: usize = 16;
 pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
+/// The robot's scan and map voxels for its LIO (config/lio_robot.toml): indoors, a wheeled
+/// base's scans reduced to 0.15 m and matched against a map kept at one point per 0.1 m voxel
+/// fit planes from the wall in front of it rather than from half a metre around; measured on
+/// development buildings (docs/lio.md, "The robot's voxels").
+pub const ROBOT_SCAN_VOXEL_M: f64 = 0.15;
+pub const ROBOT_MAP_VOXEL_M: f64 = 0.1;
 /// The floor grid's ray stride in scored offline runs (`starc mission`, `starc eval`): one ray
 /// in 8 fills a room's floor within a few scans at a few milliseconds a scan.
 pub const FLOOR_GRID_RAY_STRIDE: usize = 8;
@@ -86,6 +92,8 @@ impl RobotCoreConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             still_sigma_m_s: 0.0,
             wheel: WheelFusion { pos_imu_base: ROBOT_IMU_T_BASE_M.into(), ..WheelFusion::default() },
+            scan_voxel_m: ROBOT_SCAN_VOXEL_M,
+            map_voxel_m: ROBOT_MAP_VOXEL_M,
             ..LioConfig::default()
         }
     }
@@ -369,6 +377,8 @@ mod tests {
                 noise: generic.noise,
                 wheel: generic.wheel.clone(),
                 still_sigma_m_s: generic.still_sigma_m_s,
+                scan_voxel_m: generic.scan_voxel_m,
+                map_voxel_m: generic.map_voxel_m,
                 ..robot
             },
             generic
