@@ -113,6 +113,11 @@ pub struct WheelsSection {
     /// accelerometer's mean less the base's acceleration from the wheels (`lio::level`); 0: not
     /// measured. Default 0.1.
     pub level_sigma_m_s2: f64,
+    /// While the wheels say the base's centre stands (planar speed at most
+    /// `hold_max_speed_m_s`, turning in place allowed), hold the centre where it stood with this
+    /// noise (1 sigma per axis, m; `lio::stand`); 0: not held.
+    pub hold_sigma_m: f64,
+    pub hold_max_speed_m_s: f64,
 }
 
 impl Default for WheelsSection {
@@ -128,6 +133,8 @@ impl Default for WheelsSection {
             huber_k: w.huber_k,
             gate_chi2: w.gate_chi2,
             level_sigma_m_s2: w.level_sigma_m_s2,
+            hold_sigma_m: w.hold_sigma_m,
+            hold_max_speed_m_s: w.hold_max_speed_m_s,
         }
     }
 }
@@ -145,7 +152,12 @@ impl WheelsSection {
                 return Err(format!("{name} must be a positive number, not {v}"));
             }
         }
-        for (name, v) in [("wheels.sigma_rel", self.sigma_rel), ("wheels.level_sigma_m_s2", self.level_sigma_m_s2)] {
+        for (name, v) in [
+            ("wheels.sigma_rel", self.sigma_rel),
+            ("wheels.level_sigma_m_s2", self.level_sigma_m_s2),
+            ("wheels.hold_sigma_m", self.hold_sigma_m),
+            ("wheels.hold_max_speed_m_s", self.hold_max_speed_m_s),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("{name} must be 0 or more, not {v}"));
             }
@@ -161,6 +173,8 @@ impl WheelsSection {
             huber_k: self.huber_k,
             gate_chi2: self.gate_chi2,
             level_sigma_m_s2: self.level_sigma_m_s2,
+            hold_sigma_m: self.hold_sigma_m,
+            hold_max_speed_m_s: self.hold_max_speed_m_s,
         })
     }
 }

@@ -18,6 +18,7 @@ mod odometry;
 mod plane;
 mod propagate;
 mod so3;
+mod stand;
 mod state;
 mod still;
 mod types;

@@ -6,6 +6,7 @@ use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, 
 use super::ivox::VoxelMap;
 use super::level::{level_update, LevelWindow};
 use super::propagate::{step, ImuNoise, Knot};
+use super::stand::{base_position, hold_update, stands};
 use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
 use super::still::{zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
@@ -132,6 +133,10 @@ pub struct Lio {
     wheels: VecDeque<WheelSample>,
     /// The accelerometer and the wheels since the last scan (the tilt's measurement).
     level: LevelWindow,
+    /// Where the base's centre stood since the wheels last said it stopped (`lio::stand`), and
+    /// whether they say it stands now.
+    stand_anchor: Option<Vector3<f64>>,
+    standing: bool,
     /// Scans whose tilt was measured (accelerometer less the wheels), and those gated.
     level_updates: (u64, u64),
     /// The clock of the first input; inputs on any other are refused and counted.
@@ -177,6 +182,8 @@ impl Lio {
             deskewed: Vec::new(),
             wheels: VecDeque::new(),
             level: LevelWindow::default(),
+            stand_anchor: None,
+            standing: false,
             level_updates: (0, 0),
             clock: None,
             other_clock_inputs: 0,
@@ -417,6 +424,12 @@ impl Lio {
         if verdict.is_some() && refused.is_none() {
             self.updates_accepted += 1;
         }
+        // The first standing scan's pose, as its update left it, is where the base is held.
+        if !self.standing {
+            self.stand_anchor = None;
+        } else if self.stand_anchor.is_none() {
+            self.stand_anchor = Some(base_position(&self.state, &self.cfg.wheel));
+        }
         if refused.is_none() || grow_anyway {
             let (r, t) =
                 (self.state.rot * self.state.rot_imu_lidar, self.state.rot * self.state.pos_imu_lidar + self.state.pos);
@@ -461,10 +474,15 @@ impl Lio {
             self.wheels.pop_front();
         }
         let level = self.level.take(twist);
+        self.standing = false;
         let (Some(twist), Some(held)) = (twist, self.held) else { return WheelUse::None };
         let used = wheel_update(&mut self.state, &mut self.cov, &held.gyro_rad_s, &twist, &self.cfg.wheel);
         if let (WheelUse::Applied, Some((mean_acc, acc_base))) = (used, level) {
             self.level_step(&mean_acc, &acc_base);
+        }
+        self.standing = used == WheelUse::Applied && stands(&twist, &self.cfg.wheel);
+        if let (true, Some(anchor)) = (self.standing, self.stand_anchor) {
+            hold_update(&mut self.state, &mut self.cov, &anchor, &self.cfg.wheel);
         }
         used
     }

@@ -48,6 +48,12 @@ pub struct WheelFusion {
     /// acceleration, once per scan ([`super::level`]); 0: not measured. 0.1 m/s² (about 0.6 deg
     /// per scan) chosen on development buildings (docs/lio.md, "The robot's tilt").
     pub level_sigma_m_s2: f64,
+    /// While the wheels say the base's centre stands (planar speed at most
+    /// `hold_max_speed_m_s`; turning in place allowed), the centre is held where it stood with
+    /// this noise per axis ([`super::stand`]); 0: not held. 0.01 m chosen on development
+    /// buildings (docs/lio.md, "A standing base holds its place").
+    pub hold_sigma_m: f64,
+    pub hold_max_speed_m_s: f64,
 }
 
 impl Default for WheelFusion {
@@ -62,6 +68,8 @@ impl Default for WheelFusion {
             huber_k: 2.0,
             gate_chi2: 30.0,
             level_sigma_m_s2: 0.1,
+            hold_sigma_m: 0.01,
+            hold_max_speed_m_s: 0.01,
         }
     }
 }
