@@ -41,16 +41,7 @@ mod tests {
     use nalgebra::Rotation3;
 
     fn state_at(pos: Vector3<f64>, yaw_rad: f64) -> State {
-        State {
-            rot: Rotation3::from_euler_angles(0.0, 0.0, yaw_rad),
-            pos,
-            vel: Vector3::zeros(),
-            bias_gyro: Vector3::zeros(),
-            bias_acc: Vector3::zeros(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            rot_imu_lidar: Rotation3::identity(),
-            pos_imu_lidar: Vector3::zeros(),
-        }
+        State { rot: Rotation3::from_euler_angles(0.0, 0.0, yaw_rad), pos, ..State::at_rest() }
     }
 
     fn twist(vx_m_s: f64, wz_rad_s: f64) -> WheelSample {
