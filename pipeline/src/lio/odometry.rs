@@ -133,10 +133,8 @@ pub struct Lio {
     wheels: VecDeque<WheelSample>,
     /// The accelerometer and the wheels since the last scan (the tilt's measurement).
     level: LevelWindow,
-    /// Where the base's centre stood since the wheels last said it stopped (`lio::stand`), and
-    /// whether they say it stands now.
+    /// Where the base's centre stood since the wheels last said it stopped (`lio::stand`).
     stand_anchor: Option<Vector3<f64>>,
-    standing: bool,
     /// Scans whose tilt was measured (accelerometer less the wheels), and those gated.
     level_updates: (u64, u64),
     /// The clock of the first input; inputs on any other are refused and counted.
@@ -183,7 +181,6 @@ impl Lio {
             wheels: VecDeque::new(),
             level: LevelWindow::default(),
             stand_anchor: None,
-            standing: false,
             level_updates: (0, 0),
             clock: None,
             other_clock_inputs: 0,
@@ -371,7 +368,7 @@ impl Lio {
         self.knots.clear();
         self.propagate_to(scan.end_ns);
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
-        let wheel = self.wheel_step(scan.end_ns);
+        let (wheel, standing) = self.wheel_step(scan.end_ns);
         let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
         // A non-finite point fails the comparison (NaN) or is kept out explicitly (infinity).
         let mut used = voxel_downsample(
@@ -425,7 +422,7 @@ impl Lio {
             self.updates_accepted += 1;
         }
         // The first standing scan's pose, as its update left it, is where the base is held.
-        if !self.standing {
+        if !standing {
             self.stand_anchor = None;
         } else if self.stand_anchor.is_none() {
             self.stand_anchor = Some(base_position(&self.state, &self.cfg.wheel));
@@ -466,25 +463,25 @@ impl Lio {
 
     /// The wheels' mean twist over the window before `end_ns` into the state (after the
     /// deskew, which used the state the IMU alone gave, and before the scan's update, whose
-    /// prior then holds it); older samples are dropped.
-    fn wheel_step(&mut self, end_ns: u64) -> WheelUse {
+    /// prior then holds it); older samples are dropped. Also says whether the wheels were
+    /// applied and say the base's centre stands (then it is held, [`super::stand`]).
+    fn wheel_step(&mut self, end_ns: u64) -> (WheelUse, bool) {
         let window_ns = self.cfg.wheel.window_ns;
         let twist = mean_twist(self.wheels.iter().copied(), end_ns, window_ns);
         while self.wheels.front().is_some_and(|s| s.t_ns + window_ns <= end_ns) {
             self.wheels.pop_front();
         }
         let level = self.level.take(twist);
-        self.standing = false;
-        let (Some(twist), Some(held)) = (twist, self.held) else { return WheelUse::None };
+        let (Some(twist), Some(held)) = (twist, self.held) else { return (WheelUse::None, false) };
         let used = wheel_update(&mut self.state, &mut self.cov, &held.gyro_rad_s, &twist, &self.cfg.wheel);
         if let (WheelUse::Applied, Some((mean_acc, acc_base))) = (used, level) {
             self.level_step(&mean_acc, &acc_base);
         }
-        self.standing = used == WheelUse::Applied && stands(&twist, &self.cfg.wheel);
-        if let (true, Some(anchor)) = (self.standing, self.stand_anchor) {
+        let standing = used == WheelUse::Applied && stands(&twist, &self.cfg.wheel);
+        if let (true, Some(anchor)) = (standing, self.stand_anchor) {
             hold_update(&mut self.state, &mut self.cov, &anchor, &self.cfg.wheel);
         }
-        used
+        (used, standing)
     }
 
     /// The tilt from the accelerometer's mean less the base's acceleration ([`super::level`]),
