@@ -21,6 +21,10 @@ pub struct DetectConfig {
     pub ceiling_min_points: usize,
     /// Points closer than this below the ceiling are ceiling.
     pub ceiling_band_m: f64,
+    /// A ceiling is at least this high above the floor: below it, the highest well-filled bin
+    /// is something in the room (a seated person filling the view, a table top), and taking it
+    /// for the ceiling cut that person off as structure.
+    pub ceiling_min_height_m: f64,
     /// Voxel size of the downsampled cloud the clusters are built on (26-connected voxels join).
     pub voxel_m: f64,
     /// A cluster needs at least this many points (of the window, before downsampling).
@@ -177,6 +181,7 @@ impl Default for DetectConfig {
             floor_band_m: 0.06,
             ceiling_min_points: 200,
             ceiling_band_m: 0.15,
+            ceiling_min_height_m: 2.0,
             voxel_m: 0.1,
             min_points: 25,
             plane_min_length_m: 0.8,
@@ -284,6 +289,9 @@ impl DetectConfig {
         }
         if !(self.follow_max_face_share >= 0.0 && self.follow_max_face_share <= 1.0) {
             return Err(bad("follow_max_face_share must be in [0, 1]"));
+        }
+        if !(self.ceiling_min_height_m.is_finite() && (0.0..=10.0).contains(&self.ceiling_min_height_m)) {
+            return Err(bad("ceiling_min_height_m must be between 0 and 10"));
         }
         if !self.max_bottom_m.is_finite() {
             return Err(bad("max_bottom_m must be finite"));

@@ -1,6 +1,7 @@
 //! The floor and the ceiling of a window, from its z histogram: the floor is the lowest
 //! well-filled bin below the sensor, refined by a least-squares plane (a slightly tilted map
-//! frame is absorbed); the ceiling is the highest well-filled bin above the sensor, parallel to it.
+//! frame is absorbed); the ceiling is the highest well-filled bin above the sensor and no lower
+//! than a ceiling can be, parallel to it.
 
 use super::{DetectConfig, WindowPoint};
 use nalgebra::{Matrix3, Vector3};
@@ -61,8 +62,10 @@ pub fn estimate_floor(points: &[WindowPoint], sensor_z: f64, cfg: &DetectConfig)
         floor = refit;
     }
 
-    // The ceiling: the highest well-filled bin at least 0.3 m above the sensor.
-    let above_from = (((sensor_z + 0.3 - lo) / bin).ceil() as usize).min(nbins);
+    // The ceiling: the highest well-filled bin at least 0.3 m above the sensor and at least
+    // `ceiling_min_height_m` above the floor.
+    let lowest_ceiling_z = (sensor_z + 0.3).max(peak_z + cfg.ceiling_min_height_m);
+    let above_from = (((lowest_ceiling_z - lo) / bin).ceil() as usize).min(nbins);
     let above = hist.get(above_from..).unwrap_or(&[]);
     let best_above = above.iter().copied().max().unwrap_or(0);
     if best_above as usize >= cfg.ceiling_min_points {

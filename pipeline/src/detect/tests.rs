@@ -114,6 +114,24 @@ fn finds_the_standing_and_the_lying_person_only() {
 }
 
 #[test]
+fn a_person_filling_the_view_is_no_ceiling() {
+    // The robot right in front of someone seated, no ceiling in view: their shoulders and head
+    // (up to 1.25 m) are the highest well-filled bins above the sensor.
+    let mut p = Vec::new();
+    grid(&mut p, [0.5, 4.0], [-2.0, 2.0], 0.08, |x, y| [x, y, 0.0]);
+    cylinder(&mut p, [1.0, 0.0], 0.2, [0.45, 1.05]);
+    cylinder(&mut p, [1.0, 0.0], 0.1, [1.05, 1.25]);
+    let (det, _) = detect_scene(&p);
+    let floor = det.last_floor().unwrap();
+    assert_eq!(floor.ceiling_above_floor_m, None, "{floor:?}");
+    // With a real ceiling in view as well, that is the ceiling.
+    grid(&mut p, [2.0, 6.0], [-3.0, 3.0], 0.15, |x, y| [x, y, 2.4]);
+    let (det, _) = detect_scene(&p);
+    let ceiling = det.last_floor().unwrap().ceiling_above_floor_m.unwrap();
+    assert!((ceiling - 2.4).abs() < 0.05, "{ceiling}");
+}
+
+#[test]
 fn the_floor_is_found_wherever_the_map_puts_it() {
     // The same scene 3 m higher (a map whose origin is below the floor), slightly tilted.
     let points: Vec<WindowPoint> =
