@@ -55,10 +55,6 @@ pub struct RobotCoreConfig {
     pub floor_grid_ray_stride: usize,
 }
 
-/// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
-/// wheeled base on a floor turns smoothly, so its attitude is left to its gyro between scans far
-/// more than a walker's helmet can be (the LIO's generic 0.1 lets a scan that sees little but new
-/// geometry, in a turn, tilt it by up to a degree; 0.005 is still 20 times the BMI088's density).
 /// The robot's coverage (space its rays crossed) in voxels of this size, from every this many
 /// points' rays: a quarter metre tells a room's free middle from its walls, and one ray in 16
 /// covers a room within a few scans.
@@ -68,7 +64,13 @@ pub const COVERAGE_RAY_STRIDE: usize = 16;
 /// once may be a grazing ray's).
 pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 
-pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.005;
+/// The robot's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_robot.toml): a
+/// wheeled base on a floor turns smoothly, so its attitude is left to its gyro between scans far
+/// more than a walker's helmet can be. The LIO's generic 0.1 let a scan that sees little but new
+/// geometry, in a turn, tilt it by up to a degree; 0.005 still let a stretch of scans turn the
+/// heading by a few tenths of a degree, which a long drive turns into centimetres. 0.001 is four
+/// times the BMI088's density (docs/lio.md, "The robot's gyro noise").
+pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.001;
 /// The robot's scan and map voxels for its LIO (config/lio_robot.toml): indoors, a wheeled
 /// base's scans reduced to 0.15 m and matched against a map kept at one point per 0.1 m voxel
 /// fit planes from the wall in front of it rather than from half a metre around; measured on
