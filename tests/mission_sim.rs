@@ -29,6 +29,8 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
         "/robot_pose_error/translation_m/p50",
         "/robot_pose_error/rotation_deg/p50",
         "/robot_pose_error/rmse_m",
+        "/rig_lio_error/rmse_m",
+        "/rig_lio_error/drift/silent",
         "/latency_ms/slam_p50",
         "/latency_ms/slam_p99",
         "/latency_ms/viz_p50",
@@ -48,6 +50,8 @@ fn the_mission_aligns_the_rig_and_writes_its_report() {
     let rmse = report.pointer("/robot_pose_error/rmse_m").and_then(|v| v.as_f64()).unwrap();
     assert!(rmse < 0.1, "robot LIO APE RMSE {rmse} m");
     assert!(report.pointer("/detection/windows").and_then(|v| v.as_u64()).unwrap() > 50);
+    let rig_scans = std::fs::read_to_string(mission.join("rig_error.csv")).unwrap().lines().count() - 1;
+    assert!(rig_scans > 50, "{rig_scans} rig scans scored");
     let frames = std::fs::read_dir(mission.join("ar")).unwrap().count();
     assert!(frames > 10, "{frames} AR frames");
     for plot in ["pose_error.svg", "inlier_ratio.svg", "latency.svg"] {

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The figures the summary line and the plots lead with.
-pub const HEADLINE: [&str; 10] = [
+pub const HEADLINE: [&str; 11] = [
     "inlier_ratio.pooled",
     "overlay.person_coverage",
     "overlay.people_shown",
@@ -21,6 +21,7 @@ pub const HEADLINE: [&str; 10] = [
     "alignment.first_error_m",
     "rig_pose_error.translation_m.p50",
     "robot_pose_error.rmse_m",
+    "rig_lio_error.rmse_m",
 ];
 
 /// One building.

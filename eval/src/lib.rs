@@ -36,6 +36,7 @@ pub mod overlay;
 pub mod plots;
 pub mod quantiles;
 pub mod report;
+pub mod rig_lio;
 pub mod score;
 pub mod summary;
 pub mod svg_plot;

@@ -218,8 +218,11 @@ impl Run {
                     sc.rig_started(first_ns);
                 }
             }
-            MissionEvent::RigPose { end_ns, odom, world } => {
+            MissionEvent::RigPose { end_ns, odom, world, health } => {
                 self.rig_new = true;
+                if let Some(sc) = self.score.as_mut() {
+                    sc.rig_lio_pose(end_ns, &odom, health);
+                }
                 self.rig_tum.push(tum_line(end_ns, &odom));
                 if let Some(w) = world {
                     self.world_tum.push(tum_line(end_ns, &w));

@@ -20,6 +20,9 @@ pub struct Report {
     pub alignment: AlignmentReport,
     pub rig_pose_error: PoseErrorReport,
     pub robot_pose_error: RobotPoseErrorReport,
+    /// The rig's own LIO against its true path, scored as the robot's (offline runs, which
+    /// report its health; null where the rig never ran).
+    pub rig_lio_error: Option<RobotPoseErrorReport>,
     pub exploration: ExplorationReport,
     pub latency_ms: LatencyReport,
     pub memory: MemoryReport,
@@ -154,8 +157,9 @@ pub struct ExplorationReport {
     pub area_by_time: Vec<[f64; 2]>,
 }
 
-/// The robot's LIO poses against its true poses, the LIO world tied to the truth's at the first
-/// pose (the absolute pose error of evo's APE with that anchor instead of a fitted alignment).
+/// A device's LIO poses against its true poses, the LIO world tied to the truth's at the first
+/// pose (the absolute pose error of evo's APE with that anchor instead of a fitted alignment):
+/// the robot's (`robot_pose_error`) and the rig's own odometry (`rig_lio_error`).
 #[derive(Debug, Serialize)]
 pub struct RobotPoseErrorReport {
     pub translation_m: Quantiles,

@@ -23,6 +23,7 @@ use crate::report::{
     AlignmentReport, DetectionReport, ExplorationReport, InlierReport, LatencyReport, MapSightReport, MemoryReport,
     PoseErrorReport, PosePrecision, PoseRecall, Report, RobotPoseErrorReport,
 };
+use crate::rig_lio::RigLioLog;
 use crate::truth::{at, people_at, CameraFrame, PersonBox, TruePose, Truth};
 use nalgebra::{Isometry3, Vector3};
 use starc_pipeline::align::pose_error;
@@ -93,6 +94,8 @@ pub struct Scorer {
     explored: Vec<(u64, f64)>,
     /// Each robot pose's time and error, and the LIO's health when the run reports it.
     robot_series: Vec<(u64, f64, Option<Health>)>,
+    /// The rig's own LIO poses against its true path (offline runs).
+    rig_lio: RigLioLog,
     detected: DetectedLog,
     pending: VecDeque<PendingFrame>,
     overlay: OverlayTally,
@@ -135,6 +138,7 @@ impl Scorer {
             robot_ns: None,
             explored: Vec::new(),
             robot_series: Vec::new(),
+            rig_lio: RigLioLog::default(),
             detected: DetectedLog::default(),
             pending: VecDeque::new(),
             overlay: OverlayTally::default(),
@@ -196,6 +200,13 @@ impl Scorer {
             return None;
         }
         Some(drift_stretches(&poses, DRIFT_WINDOW_NS, DRIFT_GROW_M))
+    }
+
+    /// One pose of the rig's own LIO (its odometry frame) with its health, scored against the
+    /// rig's true path ([`crate::rig_lio`]).
+    pub fn rig_lio_pose(&mut self, end_ns: u64, odom: &Isometry3<f64>, health: Health) {
+        let truth = at(&self.truth.gt_fpv, end_ns);
+        self.rig_lio.push(end_ns, odom, &truth, health);
     }
 
     /// The rig's first LIO pose (alignment times count from it).
@@ -468,6 +479,7 @@ impl Scorer {
                 rmse_m: rmse(&self.robot_err_m),
                 drift: self.drift(),
             },
+            rig_lio_error: self.rig_lio.report(),
             exploration: self.exploration(),
             latency_ms: latency,
             memory,
@@ -476,6 +488,9 @@ impl Scorer {
         report.write(&out.join("report.json"))?;
         write(&out.join("frames.csv"), self.frame_rows.join("\n") + "\n")?;
         write(&out.join("robot_error.csv"), self.robot_error_csv())?;
+        if self.rig_lio.report().is_some() {
+            write(&out.join("rig_error.csv"), self.rig_lio.csv())?;
+        }
         write_plots(out, &self.err_series, &self.inlier_series, total_ms)?;
         Ok(report)
     }
@@ -573,6 +588,9 @@ mod tests {
         for key in ["translation_m/p50", "translation_m/p99", "translation_m/max", "rotation_deg/p50", "rmse_m"] {
             assert!(json.pointer(&format!("/robot_pose_error/{key}")).is_some_and(|v| v.is_f64()), "{key}");
         }
+        // No rig pose came: its odometry is not scored, and says so.
+        assert!(json.pointer("/rig_lio_error").is_some_and(serde_json::Value::is_null));
+        assert!(!out.path().join("rig_error.csv").exists());
         assert!(json.pointer("/rig_pose_error/translation_m").is_some(), "the rig's key stays");
         let csv = std::fs::read_to_string(out.path().join("robot_error.csv")).unwrap();
         let lines: Vec<&str> = csv.lines().collect();

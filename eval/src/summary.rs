@@ -73,6 +73,18 @@ pub fn summary(r: &Report) -> String {
         e.rotation_deg.p50,
         e.rotation_deg.max
     );
+    if let Some(e) = &r.rig_lio_error {
+        let drift = e.drift.as_ref().map_or(String::new(), |d| {
+            format!("; {} drift stretches (10 cm within 5 s), {} of them unflagged", d.stretches, d.silent)
+        });
+        let _ = writeln!(
+            o,
+            "  rig LIO pose error (its own odometry, from its first pose): {:.1} cm median, {:.1} cm max, {:.1} cm RMSE{drift}",
+            e.translation_m.p50 * 100.0,
+            e.translation_m.max * 100.0,
+            e.rmse_m * 100.0,
+        );
+    }
     let x = &r.exploration;
     if let Some([t_s, _]) = x.area_by_time.last() {
         let _ = writeln!(

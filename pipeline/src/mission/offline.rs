@@ -17,8 +17,8 @@ pub enum MissionEvent {
     Detection(Box<RobotDetection>),
     /// The rig's first LIO pose.
     RigStarted { first_ns: u64 },
-    /// A rig LIO pose, and its world pose if the rig is placed.
-    RigPose { end_ns: u64, odom: Isometry3<f64>, world: Option<Isometry3<f64>> },
+    /// A rig LIO pose with its health, and its world pose if the rig is placed.
+    RigPose { end_ns: u64, odom: Isometry3<f64>, world: Option<Isometry3<f64>>, health: crate::lio::Health },
     /// A registration ran (`world_t_lidar` is identity and `total_ms` NaN when it failed to run).
     Alignment { end_ns: u64, world_t_lidar: Isometry3<f64>, total_ms: f64, verdict: AlignVerdict },
 }
@@ -76,7 +76,7 @@ impl OfflineMission {
                 events.push(MissionEvent::RigStarted { first_ns: o.end_ns });
             }
             let world = self.rig.core().world().world_pose(o.end_ns).ok().flatten();
-            events.push(MissionEvent::RigPose { end_ns: o.end_ns, odom: o.lidar_pose, world });
+            events.push(MissionEvent::RigPose { end_ns: o.end_ns, odom: o.lidar_pose, world, health: o.health });
         }
     }
 
