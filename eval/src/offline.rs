@@ -9,6 +9,7 @@ use nalgebra::Isometry3;
 use starc_hil::tum::tum_line;
 use starc_pipeline::align::AlignConfig;
 use starc_pipeline::ar::{CameraModel, RenderConfig};
+use starc_pipeline::lio::LioConfig;
 use starc_pipeline::mission::{
     AlignVerdict, FrameTime, MissionEvent, MissionInput, OfflineMission, RigCoreConfig, RigSide, RigSideConfig,
     RobotCore, RobotCoreConfig, Side, HOLD_NS,
@@ -46,6 +47,8 @@ pub struct Offline {
     pub robot: RobotCoreConfig,
     /// The rig's first-alignment search (`RigCoreConfig::align`; `--align-config`).
     pub rig_align: AlignConfig,
+    /// The rig's LIO (`RigCoreConfig::lio`; `--rig-lio-config`).
+    pub rig_lio: LioConfig,
     /// With the simulator's truth: the camera frames rendered and scored into report.json.
     /// Without: a frame after every rig scan, and replay.json with what needs no truth.
     pub truth: Option<Truth>,
@@ -73,6 +76,7 @@ impl Offline {
             coverage: true,
             robot: RobotCoreConfig::default(),
             rig_align: RigCoreConfig::default().align,
+            rig_lio: RigCoreConfig::default().lio,
             truth: Some(truth),
             wall_timing,
             align: true,
@@ -147,10 +151,14 @@ impl Run {
         let pipeline = |source| EvalError::Pipeline { path: cfg.out.clone(), source };
         let stopwatch = Stopwatch::wall_if(cfg.wall_timing);
         let robot_cfg = cfg.robot.clone().with_stopwatch(stopwatch);
-        let core =
-            RigCoreConfig { start_gate_m: cfg.start_gate_m, align: cfg.rig_align.clone(), ..RigCoreConfig::default() }
-                .with_confirm_first_s(cfg.confirm_first_s)
-                .with_stopwatch(stopwatch);
+        let core = RigCoreConfig {
+            start_gate_m: cfg.start_gate_m,
+            align: cfg.rig_align.clone(),
+            lio: cfg.rig_lio.clone(),
+            ..RigCoreConfig::default()
+        }
+        .with_confirm_first_s(cfg.confirm_first_s)
+        .with_stopwatch(stopwatch);
         let rig_cfg = RigSideConfig {
             core,
             camera: cfg.camera.clone(),

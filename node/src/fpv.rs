@@ -206,7 +206,11 @@ fn side_config(cfg: &FpvNodeConfig) -> Result<RigSideConfig> {
     camera.validate().map_err(|e| NodeError::Config(format!("[camera]: {e}")))?;
     Ok(RigSideConfig {
         core: RigCoreConfig {
-            lio: lio_config(cfg.lio.as_deref())?,
+            // Without a file, the rig's own defaults (config/lio_rig.toml).
+            lio: match cfg.lio.as_deref() {
+                Some(path) => lio_config(Some(path))?,
+                None => RigCoreConfig::rig_lio(),
+            },
             start_gate_m: cfg.start_gate_m,
             ..RigCoreConfig::default()
         }

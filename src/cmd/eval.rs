@@ -76,6 +76,10 @@ pub struct Args {
     /// optional): to measure a setting on the generated buildings.
     #[arg(long)]
     align_config: Option<PathBuf>,
+    /// The rig's LIO settings (TOML, as config/lio.toml; every key optional): to measure a
+    /// setting on the generated buildings (report.json `rig_lio_error`).
+    #[arg(long)]
+    rig_lio_config: Option<PathBuf>,
 }
 
 /// An inclusive range of seeds.
@@ -283,6 +287,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             coverage: !args.no_coverage,
             robot: robot_config(args)?,
             rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
+            rig_lio: super::align::rig_lio_config(args.rig_lio_config.as_deref())?,
             truth: Some(truth),
             wall_timing: true,
             align: !args.no_align,

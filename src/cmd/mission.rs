@@ -61,6 +61,9 @@ pub struct Args {
     /// optional): to measure a setting on the generated buildings.
     #[arg(long)]
     pub align_config: Option<PathBuf>,
+    /// The rig's LIO settings (TOML, as config/lio.toml; every key optional).
+    #[arg(long)]
+    pub rig_lio_config: Option<PathBuf>,
     #[command(flatten)]
     pub detector: super::detector_arg::DetectorArgs,
 }
@@ -90,6 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..RobotCoreConfig::default()
         },
         rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
+        rig_lio: super::align::rig_lio_config(args.rig_lio_config.as_deref())?,
         truth: Some(truth),
         wall_timing: true,
         align: true,

@@ -82,6 +82,7 @@ fn without_truth(config: Option<&std::path::Path>, out: PathBuf, args: &Args) ->
         coverage: true,
         robot: RobotCoreConfig::default(),
         rig_align: starc_pipeline::mission::RigCoreConfig::default().align,
+        rig_lio: starc_pipeline::mission::RigCoreConfig::default().lio,
         truth: None,
         wall_timing: !args.no_wall_timing,
         align: true,

@@ -178,6 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             walker_min_height_m: None,
             no_wheels: false,
             align_config: None,
+            rig_lio_config: None,
             detector: args.detector.clone(),
         })?;
     } else if !args.sensors_only && !args.no_camera {

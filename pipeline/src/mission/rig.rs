@@ -15,7 +15,7 @@ use crate::align::{
     PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
 };
 use crate::ar::OrientedBox;
-use crate::lio::{ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use crate::PipelineError;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -81,10 +81,27 @@ pub struct RigCoreConfig {
     pub view_voxel_m: f64,
 }
 
+/// The rig's gyro noise density for its LIO (rad/s per sqrt(Hz); config/lio_rig.toml). The
+/// LIO's generic 0.1 (400 times the BMI088's density) let the scans of a sparse view turn the
+/// rig's attitude, and gravity then leaked into its position; a helmet or a hand turns faster
+/// and more sharply than a wheeled base (the robot's 0.001), so the margin stays wider: 0.01,
+/// measured on development buildings (docs/lio.md, "The rig's gyro noise").
+pub const RIG_GYRO_NOISE_RAD_S: f64 = 0.01;
+
+impl RigCoreConfig {
+    /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`].
+    pub fn rig_lio() -> LioConfig {
+        LioConfig {
+            noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
+            ..LioConfig::default()
+        }
+    }
+}
+
 impl Default for RigCoreConfig {
     fn default() -> Self {
         Self {
-            lio: LioConfig::default(),
+            lio: Self::rig_lio(),
             align: AlignConfig::default(),
             // A re-registration must be well conditioned: a borderline one (a corridor's axis)
             // moves a good odometry pose more than it corrects it, so the index alone decides.
@@ -778,10 +795,22 @@ fn window(
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
-    use super::{start_offset_m, RigCore, RigCoreConfig};
+    use super::{start_offset_m, RigCore, RigCoreConfig, RIG_GYRO_NOISE_RAD_S};
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
+    use crate::lio::{LioConfig, LioFile};
     use nalgebra::Vector3;
+
+    #[test]
+    fn the_shipped_rig_lio_config_is_the_rigs_defaults() {
+        let file = LioFile::from_toml(include_str!("../../../config/lio_rig.toml")).unwrap();
+        assert_eq!(file.to_config().unwrap(), RigCoreConfig::rig_lio());
+        assert_eq!(RigCoreConfig::default().lio, RigCoreConfig::rig_lio());
+        // Everything but the gyro's noise is the LIO's generic default.
+        let mut generic = LioConfig::default();
+        generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
+        assert_eq!(RigCoreConfig::rig_lio(), generic);
+    }
 
     #[test]
     fn people_are_carried_into_the_odometry_frame_once_the_rig_is_placed() {
