@@ -6,6 +6,24 @@ use serde::Serialize;
 use starc_pipeline::lio::Health;
 use std::collections::BTreeMap;
 
+/// The odometry issue's drift: a pose whose error exceeds the smallest of the 5 s before it by
+/// more than 10 cm (the robot's and the rig's alike).
+pub const DRIFT_GROW_M: f64 = 0.10;
+pub const DRIFT_WINDOW_NS: u64 = 5_000_000_000;
+
+/// The per-scan error table (robot_error.csv, rig_error.csv): seconds since the first row, the
+/// pose error against the truth (m, deg) and the LIO's health (empty where the run did not
+/// report it), for finding where an odometry went wrong.
+pub fn error_csv(rows: impl IntoIterator<Item = (u64, f64, f64, Option<Health>)>) -> String {
+    let mut csv = String::from("time_s,error_m,error_deg,health\n");
+    let mut first = None;
+    for (t_ns, m, deg, health) in rows {
+        let t_s = t_ns.saturating_sub(*first.get_or_insert(t_ns)) as f64 * 1e-9;
+        csv += &format!("{t_s:.3},{m:.4},{deg:.3},{}\n", health.map_or("", Health::name));
+    }
+    csv
+}
+
 /// One scored robot pose: its time, its error against the truth, and the LIO's health.
 #[derive(Clone, Copy, Debug)]
 pub struct ScoredPose {

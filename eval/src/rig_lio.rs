@@ -4,16 +4,13 @@
 //! With the LIO's health per pose, the same drift test as the robot's ([`crate::drift`]): a
 //! stretch of error growth the health never flagged is a failure the responder cannot see.
 
-use crate::drift::{drift_stretches, ScoredPose};
+use crate::drift::{drift_stretches, error_csv, ScoredPose, DRIFT_GROW_M, DRIFT_WINDOW_NS};
 use crate::quantiles::quantiles;
 use crate::report::RobotPoseErrorReport;
+use crate::score::rmse;
 use nalgebra::Isometry3;
 use starc_pipeline::align::pose_error;
 use starc_pipeline::lio::Health;
-
-/// Drift: a pose whose error exceeds the smallest of the 5 s before it by more than 10 cm.
-const DRIFT_GROW_M: f64 = 0.10;
-const DRIFT_WINDOW_NS: u64 = 5_000_000_000;
 
 /// One scored rig pose.
 #[derive(Clone, Copy, Debug)]
@@ -53,20 +50,14 @@ impl RigLioLog {
         Some(RobotPoseErrorReport {
             translation_m: quantiles(&m),
             rotation_deg: quantiles(&deg),
-            rmse_m: (m.iter().map(|e| e * e).sum::<f64>() / m.len() as f64).sqrt(),
+            rmse_m: rmse(&m),
             drift: Some(drift_stretches(&scored, DRIFT_WINDOW_NS, DRIFT_GROW_M)),
         })
     }
 
-    /// rig_error.csv: per rig scan, seconds since the first, the error and the health.
+    /// rig_error.csv: per rig scan, as robot_error.csv ([`error_csv`]).
     pub fn csv(&self) -> String {
-        let first = self.poses.first().map_or(0, |p| p.t_ns);
-        let mut csv = String::from("time_s,error_m,error_deg,health\n");
-        for p in &self.poses {
-            let t_s = p.t_ns.saturating_sub(first) as f64 * 1e-9;
-            csv += &format!("{t_s:.3},{:.4},{:.3},{}\n", p.error_m, p.error_deg, p.health.name());
-        }
-        csv
+        error_csv(self.poses.iter().map(|p| (p.t_ns, p.error_m, p.error_deg, Some(p.health))))
     }
 }
 

@@ -10,7 +10,7 @@
 
 use crate::ap::{class_of_pose, ApTally};
 use crate::detection::{box_returns, truth_in_world};
-use crate::drift::{drift_stretches, DriftReport, ScoredPose};
+use crate::drift::{drift_stretches, error_csv, DriftReport, ScoredPose, DRIFT_GROW_M, DRIFT_WINDOW_NS};
 use crate::error::{write, EvalError, Result};
 use crate::map_sight::MapSight;
 use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
@@ -36,8 +36,6 @@ use std::path::Path;
 
 /// A drift stretch: the robot's pose error growing by more than this within this long (the
 /// odometry issue's test: every such stretch must be flagged degraded or worse).
-const DRIFT_GROW_M: f64 = 0.10;
-const DRIFT_WINDOW_NS: u64 = 5_000_000_000;
 /// An accepted alignment this close to the truth is right (the alignment issue's goal); any
 /// other accepted one is wrong.
 const RIGHT_M: f64 = 0.10;
@@ -180,13 +178,7 @@ impl Scorer {
     /// Per robot scan: time since the first, pose error against the truth and the LIO's health
     /// (empty where the run did not report it), for finding where an odometry went wrong.
     fn robot_error_csv(&self) -> String {
-        let first = self.robot_series.first().map_or(0, |r| r.0);
-        let mut csv = String::from("time_s,error_m,error_deg,health\n");
-        for (&(t_ns, m, health), deg) in self.robot_series.iter().zip(&self.robot_err_deg) {
-            let health = health.map_or("", Health::name);
-            csv += &format!("{:.3},{m:.4},{deg:.3},{health}\n", t_ns.saturating_sub(first) as f64 * 1e-9);
-        }
-        csv
+        error_csv(self.robot_series.iter().zip(&self.robot_err_deg).map(|(&(t, m, h), &deg)| (t, m, deg, h)))
     }
 
     /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
@@ -488,7 +480,7 @@ impl Scorer {
         report.write(&out.join("report.json"))?;
         write(&out.join("frames.csv"), self.frame_rows.join("\n") + "\n")?;
         write(&out.join("robot_error.csv"), self.robot_error_csv())?;
-        if self.rig_lio.report().is_some() {
+        if report.rig_lio_error.is_some() {
             write(&out.join("rig_error.csv"), self.rig_lio.csv())?;
         }
         write_plots(out, &self.err_series, &self.inlier_series, total_ms)?;
@@ -513,7 +505,7 @@ impl Scorer {
 }
 
 /// The root mean square of the finite values of `v` (NaN when there are none).
-fn rmse(v: &[f64]) -> f64 {
+pub(crate) fn rmse(v: &[f64]) -> f64 {
     let (sum, n) = v.iter().filter(|x| x.is_finite()).fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
     if n == 0 {
         f64::NAN

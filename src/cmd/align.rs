@@ -142,37 +142,9 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
     Ok(())
 }
 
-/// The rig's LIO settings: `path`'s (a LIO config, as config/lio.toml), else the rig's defaults.
-pub fn rig_lio_config(path: Option<&std::path::Path>) -> anyhow::Result<starc_pipeline::lio::LioConfig> {
-    let Some(path) = path else { return Ok(starc_pipeline::mission::RigCoreConfig::default().lio) };
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let file = starc_pipeline::lio::LioFile::from_toml(&text).with_context(|| format!("parsing {}", path.display()))?;
-    file.to_config().with_context(|| format!("checking {}", path.display()))
-}
-
 /// The rig's first-alignment search settings: `path`'s (an align.toml), else the rig's defaults.
 pub fn rig_align_config(path: Option<&std::path::Path>) -> anyhow::Result<AlignConfig> {
     let Some(path) = path else { return Ok(starc_pipeline::mission::RigCoreConfig::default().align) };
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     AlignConfig::from_toml(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used)]
-    use super::*;
-
-    #[test]
-    fn the_rig_lio_config_is_the_default_without_a_file_and_the_files_with_one() {
-        assert_eq!(rig_lio_config(None).unwrap(), starc_pipeline::mission::RigCoreConfig::default().lio);
-        let dir = tempfile::tempdir().unwrap();
-        let good = dir.path().join("rig.toml");
-        std::fs::write(&good, "[imu]\ngyro_noise_rad_s = 0.01\n").unwrap();
-        assert_eq!(rig_lio_config(Some(&good)).unwrap().noise.gyro_rad_s, 0.01);
-        // An unknown key is refused, and the error names the file.
-        let bad = dir.path().join("bad.toml");
-        std::fs::write(&bad, "[imu]\ngyro_noise = 0.01\n").unwrap();
-        let err = format!("{:#}", rig_lio_config(Some(&bad)).unwrap_err());
-        assert!(err.contains("bad.toml"), "{err}");
-    }
 }

@@ -287,7 +287,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             coverage: !args.no_coverage,
             robot: robot_config(args)?,
             rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
-            rig_lio: super::align::rig_lio_config(args.rig_lio_config.as_deref())?,
+            rig_lio: super::lio::rig_lio_config(args.rig_lio_config.as_deref())?,
             truth: Some(truth),
             wall_timing: true,
             align: !args.no_align,

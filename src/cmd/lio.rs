@@ -232,6 +232,13 @@ fn quantile_ms(sorted_us: &[u64], q: f64) -> f64 {
     sorted_us.get(i).map_or(0.0, |&v| v as f64 * 1e-3)
 }
 
+/// The rig's LIO settings for `starc mission` and `starc eval`: `path`'s (a LIO config, as
+/// config/lio.toml; every key optional), else the rig's defaults (config/lio_rig.toml).
+pub fn rig_lio_config(path: Option<&Path>) -> anyhow::Result<LioConfig> {
+    let Some(path) = path else { return Ok(starc_pipeline::mission::RigCoreConfig::rig_lio()) };
+    load_config(Some(path))?.to_config().with_context(|| format!("{}", path.display()))
+}
+
 fn load_config(path: Option<&Path>) -> anyhow::Result<LioFile> {
     let Some(path) = path else { return Ok(LioFile::default()) };
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -531,4 +538,24 @@ fn report(s: &Summary) -> String {
         }
     }
     o
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_rig_lio_config_is_the_default_without_a_file_and_the_files_with_one() {
+        assert_eq!(rig_lio_config(None).unwrap(), starc_pipeline::mission::RigCoreConfig::default().lio);
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("rig.toml");
+        std::fs::write(&good, "[imu]\ngyro_noise_rad_s = 0.01\n").unwrap();
+        assert_eq!(rig_lio_config(Some(&good)).unwrap().noise.gyro_rad_s, 0.01);
+        // An unknown key is refused, and the error names the file.
+        let bad = dir.path().join("bad.toml");
+        std::fs::write(&bad, "[imu]\ngyro_noise = 0.01\n").unwrap();
+        let err = format!("{:#}", rig_lio_config(Some(&bad)).unwrap_err());
+        assert!(err.contains("bad.toml"), "{err}");
+    }
 }

@@ -93,7 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..RobotCoreConfig::default()
         },
         rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
-        rig_lio: super::align::rig_lio_config(args.rig_lio_config.as_deref())?,
+        rig_lio: super::lio::rig_lio_config(args.rig_lio_config.as_deref())?,
         truth: Some(truth),
         wall_timing: true,
         align: true,
