@@ -41,6 +41,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests/peers"))
 
 ROBOT_IP = "192.168.1.101"
+# Which Avia is scored (--side): its address, our LIO config, its truth, the extrinsics key of its
+# internal IMU (RKO-LIO), and whether a base's wheels exist to fuse (the rig has none).
+SIDES = {
+    "robot": {"ip": ROBOT_IP, "config": "config/lio_robot.toml", "gt": "gt_robot.tum",
+              "imu_key": "robot_lidar_imu", "wheels": True},
+    "rig": {"ip": "192.168.2.102", "config": "config/lio_rig.toml", "gt": "gt_fpv.tum",
+            "imu_key": "fpv_lidar_imu", "wheels": False},
+}
 PEER_KEYS = {"kiss": ("kiss_icp", "KISS-ICP"), "genz": ("genz_icp", "GenZ-ICP"), "rko": ("rko_lio", "RKO-LIO")}
 
 # The simulator's bases (hil/src/sim/wheels.rs `default_geometry`), as config/base.toml's
@@ -97,10 +105,10 @@ def run(cmd, log, **kw):
     return p.stdout, time.monotonic() - began
 
 
-def lio_device(lio_dir):
+def lio_device(lio_dir, ip):
     with open(lio_dir / "lio.json") as f:
         summary = json.load(f)
-    dev = next(d for d in summary["devices"] if d["device"] == ROBOT_IP)
+    dev = next(d for d in summary["devices"] if d["device"] == ip)
     keep = ("status", "scans_in", "scans_out", "health", "scans_refused", "times_lost", "time_per_scan_ms_median",
             "time_per_scan_ms_p99", "time_per_scan_ms_max", "points_per_scan_median", "map_points")
     out = {k: dev.get(k) for k in keep}
@@ -133,32 +141,41 @@ def one_building(seed, a, work_root, out_dir):
 
     _, row["sim_wall_s"] = run([a.starc, "sim", scenario, "--sensors-only", "--no-camera", "--seed", seed,
                                 "--out", work], log)
-    cfg = ROOT / "config/lio_robot.toml"
+    side = SIDES[a.side]
+    ip, cfg = side["ip"], ROOT / side["config"]
     lio_w, lio_n = work / "lio", work / "lio_nowheels"
-    run([a.starc, "lio", work / "avia.pcap", "--device", ROBOT_IP, "--config", cfg, "--wheels", work / "robot_can.log",
-         "--base-config", work / "base.toml", "--dump-scans", "--out", lio_w], log)
-    run([a.starc, "lio", work / "avia.pcap", "--device", ROBOT_IP, "--config", cfg, "--out", lio_n], log)
-    row["lio_wheels"] = lio_device(lio_w)
-    row["lio_nowheels"] = lio_device(lio_n)
+    wheels = ["--wheels", work / "robot_can.log", "--base-config", work / "base.toml"] if side["wheels"] else []
+    run([a.starc, "lio", work / "avia.pcap", "--device", ip, "--config", cfg, *wheels, "--dump-scans",
+         "--out", lio_w], log)
+    if side["wheels"]:
+        run([a.starc, "lio", work / "avia.pcap", "--device", ip, "--config", cfg, "--out", lio_n], log)
+    row["lio_wheels"] = lio_device(lio_w, ip)
+    row["lio_nowheels"] = lio_device(lio_n if side["wheels"] else lio_w, ip)
 
     import lio_eval  # the same scoring as the peers'
     from evo.tools import file_interface
 
-    gt = file_interface.read_tum_trajectory_file(str(work / "gt_robot.tum"))
-    row["ours_nowheels"], _, _ = lio_eval.score(gt, file_interface.read_tum_trajectory_file(str(lio_n / f"{ROBOT_IP}.tum")))
+    gt_path = work / side["gt"]
+    if side["wheels"]:
+        gt = file_interface.read_tum_trajectory_file(str(gt_path))
+        ours_n = file_interface.read_tum_trajectory_file(str(lio_n / f"{ip}.tum"))
+        row["ours_nowheels"], _, _ = lio_eval.score(gt, ours_n)
 
     plot = out_dir / f"{row['name']}.png"
-    cmd = [sys.executable, ROOT / "tests/peers/lio_eval.py", "--gt", work / "gt_robot.tum",
-           "--ours", lio_w / f"{ROBOT_IP}.tum", "--scans", lio_w / f"{ROBOT_IP}_scans.bin",
+    cmd = [sys.executable, ROOT / "tests/peers/lio_eval.py", "--gt", gt_path,
+           "--ours", lio_w / f"{ip}.tum", "--scans", lio_w / f"{ip}_scans.bin",
            "--peers", a.peers, "--peer-out-dir", work / "peers", "--lio-json", lio_w / "lio.json",
-           "--plot", plot, "--title", f"{row['name']} / robot (seed {seed}, {row['set']})"]
+           "--plot", plot, "--title", f"{row['name']} / {a.side} (seed {seed}, {row['set']})"]
     if "rko" in a.peers:
-        cmd += ["--imu", work / "avia.pcap", "--imu-device", ROBOT_IP, "--imu-csv-out", work / "robot_imu_internal.csv",
-                "--extrinsics", work / "extrinsics.json"]
+        cmd += ["--imu", work / "avia.pcap", "--imu-device", ip, "--imu-csv-out", work / f"{a.side}_imu_internal.csv",
+                "--extrinsics", work / "extrinsics.json", "--extrinsics-key", side["imu_key"]]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     line, row["eval_wall_s"] = run(cmd, log, env=env)
     row["eval"] = json.loads(next(x for x in reversed(line.splitlines()) if x.startswith("{")))
     row["ours_wheels"] = row["eval"]["ours"]
+    if not side["wheels"]:
+        row["ours_nowheels"] = row["ours_wheels"]
+    row["side"] = a.side
 
     if not a.keep:
         for bulk in ("avia.pcap", "labels_robot.bin", "labels_fpv.bin", "robot_imu_external.mip"):
@@ -190,8 +207,19 @@ def median(values):
     return statistics.median(values) if values else None
 
 
+SIDE_TEXT = {
+    "robot": "The robot's Avia (192.168.1.101), `starc sim --sensors-only --no-camera --seed S`; ours is "
+             "`starc lio --config config/lio_robot.toml` with the base's wheels (W) and without (no W).",
+    "rig": "The rig's Avia (192.168.2.102, the responder's helmet or handheld rig), `starc sim --sensors-only "
+           "--no-camera --seed S`; ours is `starc lio --config config/lio_rig.toml` (no wheels), the truth "
+           "gt_fpv.tum. RKO-LIO gets the rig's internal IMU (`fpv_lidar_imu`).",
+}
+
+
 def summarize(rows, peers, out_dir, meta):
     peer_list = [p for p in ("kiss", "genz", "rko") if p in peers]
+    side = meta.get("side", "robot")
+    wheels = SIDES[side]["wheels"]
     table = []
     for r in sorted(rows, key=lambda r: r["seed"]):
         e = r.get("eval", {})
@@ -222,9 +250,8 @@ def summarize(rows, peers, out_dir, meta):
     sets = sorted({t["set"] for t in table})
     md = [f"# starc lio next to {', '.join(names.values())}: {len(table)} generated buildings ({', '.join(sets)} set)",
           "",
-          f"Made by `scripts/odometry_peers.py` ({meta['when']}, seeds {meta['seeds']}, starc {meta['starc']}). "
-          "The robot's Avia (192.168.1.101), `starc sim --sensors-only --no-camera --seed S`; ours is "
-          "`starc lio --config config/lio_robot.toml` with the base's wheels (W) and without (no W); the peers "
+          f"Made by `scripts/odometry_peers.py --side {side}` ({meta['when']}, seeds {meta['seeds']}, "
+          f"starc {meta['starc']}). " + SIDE_TEXT[side] + " The peers "
           "run on the very scans ours ran on (`--dump-scans`), scored by tests/peers/lio_eval.py with evo: APE "
           "translation RMSE after an SE(3) Umeyama fit (`evo_ape -a`; the first-pose fit where a straight path "
           "leaves it undetermined). Ratios are ours / peer (below 1: ours smaller). Times are per 100 ms scan, "
@@ -233,16 +260,20 @@ def summarize(rows, peers, out_dir, meta):
           "",
           "## Accuracy (APE RMSE, cm)",
           ""]
-    head = ["building", "ours W", "ours no W"] + [names[p] for p in peer_list] + \
-        [f"W / {names[p]}" for p in peer_list] + [f"no W / {names[p]}" for p in peer_list]
+    if wheels:
+        head = ["building", "ours W", "ours no W"] + [names[p] for p in peer_list] + \
+            [f"W / {names[p]}" for p in peer_list] + [f"no W / {names[p]}" for p in peer_list]
+    else:
+        head = ["building", "ours"] + [names[p] for p in peer_list] + [f"ours / {names[p]}" for p in peer_list]
     md.append("| " + " | ".join(head) + " |")
     md.append("|" + "---|" * len(head))
 
     def acc_row(label, t):
-        cells = [label, fmt_cm(t["ours_wheels_ape_m"]), fmt_cm(t["ours_nowheels_ape_m"])]
+        cells = [label, fmt_cm(t["ours_wheels_ape_m"])] + ([fmt_cm(t["ours_nowheels_ape_m"])] if wheels else [])
         cells += [fmt_cm(t[f"{p}_ape_m"]) if t.get(f"{p}_ape_m") is not None else failed_cell(t, p) for p in peer_list]
         cells += [fmt(t[f"ours_to_{p}_ape"], ".3f") for p in peer_list]
-        cells += [fmt(t[f"ours_nowheels_to_{p}_ape"], ".3f") for p in peer_list]
+        if wheels:
+            cells += [fmt(t[f"ours_nowheels_to_{p}_ape"], ".3f") for p in peer_list]
         return "| " + " | ".join(cells) + " |"
 
     for t in table:
@@ -250,12 +281,13 @@ def summarize(rows, peers, out_dir, meta):
     if table:
         md.append(acc_row("**median**", medians))
     md += ["", "## Time per scan (ms, median)", ""]
-    head = ["building", "ours W", "ours no W"] + [names[p] for p in peer_list] + [f"ours W / {names[p]}" for p in peer_list]
+    ours = ["ours W", "ours no W"] if wheels else ["ours"]
+    head = ["building", *ours] + [names[p] for p in peer_list] + [f"{ours[0]} / {names[p]}" for p in peer_list]
     md.append("| " + " | ".join(head) + " |")
     md.append("|" + "---|" * len(head))
 
     def time_row(label, t):
-        cells = [label, fmt(t["ours_wheels_ms"], ".2f"), fmt(t["ours_nowheels_ms"], ".2f")]
+        cells = [label, fmt(t["ours_wheels_ms"], ".2f")] + ([fmt(t["ours_nowheels_ms"], ".2f")] if wheels else [])
         cells += [fmt(t[f"{p}_ms"], ".2f") for p in peer_list]
         cells += [fmt(t[f"ours_to_{p}_time"], ".2f") for p in peer_list]
         return "| " + " | ".join(cells) + " |"
@@ -291,6 +323,8 @@ def main():
     ap.add_argument("--keep", action="store_true", help="keep the pcap, the scans and the maps")
     ap.add_argument("--force", action="store_true", help="run buildings again whose JSON exists")
     ap.add_argument("--summary-only", action="store_true")
+    ap.add_argument("--side", choices=sorted(SIDES), default="robot",
+                    help="whose Avia: the robot's (with and without its wheels) or the rig's (default: robot)")
     a = ap.parse_args()
 
     seeds = parse_seeds(a.seeds)
@@ -309,7 +343,7 @@ def main():
     starc_rev += f", binary built {built:%Y-%m-%d %H:%M:%S} UTC"
     meta = {"when": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "seeds": a.seeds,
             "set": "development" if dev else "test", "peers": a.peers, "starc": f"{a.starc} (HEAD {starc_rev})",
-            "failed_buildings": []}
+            "failed_buildings": [], "side": a.side}
     rows = []
     for seed in seeds:
         done = sorted(out_dir.glob(f"*-{seed}.json"))
@@ -331,8 +365,10 @@ def main():
         e = row["eval"]
         peers = ", ".join(f"{PEER_KEYS[p][1]} {fmt_cm(e.get(PEER_KEYS[p][0], {}).get('ape_rmse_m'))}"
                           for p in a.peers.split(","))
-        print(f"{row['name']} (seed {seed}): ours {fmt_cm(row['ours_wheels']['ape_rmse_m'])} cm with wheels, "
-              f"{fmt_cm(row['ours_nowheels']['ape_rmse_m'])} without; {peers} cm; {row['wall_s']:.0f} s", flush=True)
+        ours = (f"{fmt_cm(row['ours_wheels']['ape_rmse_m'])} cm with wheels, "
+                f"{fmt_cm(row['ours_nowheels']['ape_rmse_m'])} without" if SIDES[a.side]["wheels"]
+                else f"{fmt_cm(row['ours_wheels']['ape_rmse_m'])} cm")
+        print(f"{row['name']} (seed {seed}, {a.side}): ours {ours}; {peers} cm; {row['wall_s']:.0f} s", flush=True)
     if not a.keep and work_root.exists() and not a.summary_only:
         for d in work_root.glob("seed-*"):
             for bulk in ("avia.pcap", "labels_robot.bin", "labels_fpv.bin"):
