@@ -15,7 +15,7 @@ use crate::align::{
     PlacedPoint, Ray, Reasons, Rejection, WindowConfig,
 };
 use crate::ar::OrientedBox;
-use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput};
+use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, UpdateConfig};
 use crate::pose::{PoseBuffer, WorldPose, WorldPoseConfig};
 use crate::PipelineError;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -87,12 +87,27 @@ pub struct RigCoreConfig {
 /// and more sharply than a wheeled base (the robot's 0.001), so the margin stays wider: 0.01,
 /// measured on development buildings (docs/lio.md, "The rig's gyro noise").
 pub const RIG_GYRO_NOISE_RAD_S: f64 = 0.01;
+/// The variance the rig's LIO gives one point-to-plane residual (m^2; config/lio_rig.toml). As
+/// for the robot ([`super::robot::ROBOT_RESIDUAL_VAR_M2`]) one scan's residuals are not
+/// independent, and a helmet's scans also carry its quick turns' de-skew errors: 0.03 (17 cm).
+pub const RIG_RESIDUAL_VAR_M2: f64 = 0.03;
+/// Directions of the rig's pose a scan constrains less than this (normalised information) take
+/// no update, and the scan is reported `degenerate` (config/lio_rig.toml): a wall and a floor
+/// alone leave a walker's motion along the wall to the IMU, and say so. The generic 1e-4 only
+/// drops what a scene does not see at all.
+pub const RIG_MIN_DIRECTION_INFO: f64 = 0.001;
 
 impl RigCoreConfig {
-    /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`].
+    /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
+    /// [`RIG_RESIDUAL_VAR_M2`] and [`RIG_MIN_DIRECTION_INFO`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
             noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
+            update: UpdateConfig {
+                residual_var_m2: RIG_RESIDUAL_VAR_M2,
+                min_direction_info: RIG_MIN_DIRECTION_INFO,
+                ..UpdateConfig::default()
+            },
             ..LioConfig::default()
         }
     }
@@ -795,7 +810,9 @@ fn window(
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
-    use super::{start_offset_m, RigCore, RigCoreConfig, RIG_GYRO_NOISE_RAD_S};
+    use super::{
+        start_offset_m, RigCore, RigCoreConfig, RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2,
+    };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
     use crate::lio::{LioConfig, LioFile};
@@ -806,9 +823,12 @@ mod tests {
         let file = LioFile::from_toml(include_str!("../../../config/lio_rig.toml")).unwrap();
         assert_eq!(file.to_config().unwrap(), RigCoreConfig::rig_lio());
         assert_eq!(RigCoreConfig::default().lio, RigCoreConfig::rig_lio());
-        // Everything but the gyro's noise is the LIO's generic default.
+        // Everything but the gyro's noise and the update's residual variance and weak-direction
+        // threshold is the LIO's generic default.
         let mut generic = LioConfig::default();
         generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
+        generic.update.residual_var_m2 = RIG_RESIDUAL_VAR_M2;
+        generic.update.min_direction_info = RIG_MIN_DIRECTION_INFO;
         assert_eq!(RigCoreConfig::rig_lio(), generic);
     }
 

@@ -11,7 +11,7 @@ use crate::detect::{
     make_detector, DetectConfig, DetectWindow, Detection, Detector, FloorModel, PersonPose, WindowPoint,
 };
 use crate::explore::{OccupancyConfig, OccupancyGrid};
-use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, WheelFusion, WheelSample};
+use crate::lio::{ImuNoise, ImuSample, Lio, LioConfig, LioScan, ScanOutput, UpdateConfig, WheelFusion, WheelSample};
 use crate::timing::Stopwatch;
 use crate::PipelineError;
 use nalgebra::Vector3;
@@ -71,6 +71,12 @@ pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 /// heading by a few tenths of a degree, which a long drive turns into centimetres. 0.001 is four
 /// times the BMI088's density (docs/lio.md, "The robot's gyro noise").
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.001;
+/// The variance the robot's LIO gives one point-to-plane residual (m^2; config/lio_robot.toml).
+/// The generic 0.001 (3 cm) takes a scan's thousand centroids as independent. They are not:
+/// each is matched to a plane fitted to a map the same poses built, so one scan's errors move
+/// together, and a scan outweighed the gyro and the wheels. 0.01 (10 cm) was measured on 120
+/// development buildings (docs/lio.md, "How much one scan weighs").
+pub const ROBOT_RESIDUAL_VAR_M2: f64 = 0.01;
 /// The robot's scan and map voxels for its LIO (config/lio_robot.toml): indoors, a wheeled
 /// base's scans reduced to 0.15 m and matched against a map kept at one point per 0.1 m voxel
 /// fit planes from the wall in front of it rather than from half a metre around; measured on
@@ -86,7 +92,8 @@ pub const FLOOR_GRID_RAY_STRIDE: usize = 8;
 pub const ROBOT_IMU_T_BASE_M: [f64; 3] = [0.04165, 0.02326, -0.4784];
 
 impl RobotCoreConfig {
-    /// The robot's LIO settings: the defaults with [`ROBOT_GYRO_NOISE_RAD_S`], and no
+    /// The robot's LIO settings: the defaults with [`ROBOT_GYRO_NOISE_RAD_S`] and
+    /// [`ROBOT_RESIDUAL_VAR_M2`], and no
     /// zero-velocity update (`lio::still`): a base gliding at a steady speed looks as still to
     /// its IMU as one parked, and its wheels tell the two apart.
     pub fn robot_lio() -> LioConfig {
@@ -96,6 +103,7 @@ impl RobotCoreConfig {
             wheel: WheelFusion { pos_imu_base: ROBOT_IMU_T_BASE_M.into(), ..WheelFusion::default() },
             scan_voxel_m: ROBOT_SCAN_VOXEL_M,
             map_voxel_m: ROBOT_MAP_VOXEL_M,
+            update: UpdateConfig { residual_var_m2: ROBOT_RESIDUAL_VAR_M2, ..UpdateConfig::default() },
             ..LioConfig::default()
         }
     }
@@ -374,6 +382,7 @@ mod tests {
         let robot = RobotCoreConfig::robot_lio();
         assert_eq!(robot.wheel.pos_imu_base, nalgebra::Vector3::from(ROBOT_IMU_T_BASE_M));
         assert_eq!(robot.still_sigma_m_s, 0.0);
+        assert_eq!(robot.update, UpdateConfig { residual_var_m2: ROBOT_RESIDUAL_VAR_M2, ..generic.update });
         assert_eq!(
             LioConfig {
                 noise: generic.noise,
@@ -381,6 +390,7 @@ mod tests {
                 still_sigma_m_s: generic.still_sigma_m_s,
                 scan_voxel_m: generic.scan_voxel_m,
                 map_voxel_m: generic.map_voxel_m,
+                update: generic.update,
                 ..robot
             },
             generic
