@@ -149,8 +149,10 @@ def one_building(seed, a, work_root, out_dir):
          "--out", lio_w], log)
     if side["wheels"]:
         run([a.starc, "lio", work / "avia.pcap", "--device", ip, "--config", cfg, "--out", lio_n], log)
+    # "wheels" names our run that the peers are compared with; the rig's is its only one.
     row["lio_wheels"] = lio_device(lio_w, ip)
-    row["lio_nowheels"] = lio_device(lio_n if side["wheels"] else lio_w, ip)
+    if side["wheels"]:
+        row["lio_nowheels"] = lio_device(lio_n, ip)
 
     import lio_eval  # the same scoring as the peers'
     from evo.tools import file_interface
@@ -173,8 +175,6 @@ def one_building(seed, a, work_root, out_dir):
     line, row["eval_wall_s"] = run(cmd, log, env=env)
     row["eval"] = json.loads(next(x for x in reversed(line.splitlines()) if x.startswith("{")))
     row["ours_wheels"] = row["eval"]["ours"]
-    if not side["wheels"]:
-        row["ours_nowheels"] = row["ours_wheels"]
     row["side"] = a.side
 
     if not a.keep:
@@ -225,10 +225,11 @@ def summarize(rows, peers, out_dir, meta):
         e = r.get("eval", {})
         ours_w = r["ours_wheels"]["ape_rmse_m"]
         t = {"seed": r["seed"], "name": r["name"], "set": r["set"], "ours_wheels_ape_m": ours_w,
-             "ours_nowheels_ape_m": r["ours_nowheels"]["ape_rmse_m"],
              "ours_wheels_ms": r["lio_wheels"]["time_per_scan_ms_median"],
-             "ours_nowheels_ms": r["lio_nowheels"]["time_per_scan_ms_median"],
              "alignment": r["ours_wheels"]["alignment"]}
+        if wheels:
+            t["ours_nowheels_ape_m"] = r["ours_nowheels"]["ape_rmse_m"]
+            t["ours_nowheels_ms"] = r["lio_nowheels"]["time_per_scan_ms_median"]
         for p in peer_list:
             key = PEER_KEYS[p][0]
             pe = e.get(key, {})
@@ -239,7 +240,8 @@ def summarize(rows, peers, out_dir, meta):
             t[f"{p}_error"] = pe.get("error")
             t[f"{p}_failed_at_s"] = pe.get("failed_at_s")
             t[f"ours_to_{p}_ape"] = ours_w / ape if ape else None
-            t[f"ours_nowheels_to_{p}_ape"] = t["ours_nowheels_ape_m"] / ape if ape else None
+            if wheels:
+                t[f"ours_nowheels_to_{p}_ape"] = t["ours_nowheels_ape_m"] / ape if ape else None
             t[f"ours_to_{p}_time"] = t["ours_wheels_ms"] / ms if ms else None
         table.append(t)
     keys = [k for k in table[0] if k not in ("seed", "name", "set", "alignment")

@@ -266,7 +266,7 @@ impl Run {
     fn seed_from_truth(&mut self) {
         let (Start::FromTruth { hint_m, hint_deg }, false) = (&self.cfg.start, self.hint_set) else { return };
         let (Some(sc), Some(first)) = (self.score.as_ref(), self.mission.rig().core().first_ns()) else { return };
-        let Some(l_t_w) = sc.lio_t_world else { return };
+        let Some(l_t_w) = sc.lio_t_world() else { return };
         let hint = sc.truth.start_hint(&l_t_w, first, *hint_m, *hint_deg);
         self.mission.rig_mut().core_mut().set_start_hint(hint);
         self.hint_set = true;

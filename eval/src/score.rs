@@ -10,20 +10,19 @@
 
 use crate::ap::{class_of_pose, ApTally};
 use crate::detection::{box_returns, truth_in_world};
-use crate::drift::{drift_stretches, error_csv, DriftReport, ScoredPose, DRIFT_GROW_M, DRIFT_WINDOW_NS};
 use crate::error::{write, EvalError, Result};
 use crate::map_sight::MapSight;
 use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
 
 /// The explored floor area is sampled this often (robot time).
 const EXPLORED_EVERY_NS: u64 = 5_000_000_000;
+use crate::odometry::OdometryLog;
 use crate::plots::write_plots;
 use crate::quantiles::quantiles;
 use crate::report::{
     AlignmentReport, DetectionReport, ExplorationReport, InlierReport, LatencyReport, MapSightReport, MemoryReport,
-    PoseErrorReport, PosePrecision, PoseRecall, Report, RobotPoseErrorReport,
+    PoseErrorReport, PosePrecision, PoseRecall, Report,
 };
-use crate::rig_lio::RigLioLog;
 use crate::truth::{at, people_at, CameraFrame, PersonBox, TruePose, Truth};
 use nalgebra::{Isometry3, Vector3};
 use starc_pipeline::align::pose_error;
@@ -34,8 +33,6 @@ use starc_pipeline::mission::{RobotDetection, View};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
 
-/// A drift stretch: the robot's pose error growing by more than this within this long (the
-/// odometry issue's test: every such stretch must be flagged degraded or worse).
 /// An accepted alignment this close to the truth is right (the alignment issue's goal); any
 /// other accepted one is wrong.
 const RIGHT_M: f64 = 0.10;
@@ -55,8 +52,6 @@ struct PendingFrame {
 /// Everything scored so far.
 pub struct Scorer {
     pub truth: Truth,
-    /// The robot's LIO world from the truth's world, fixed at the robot's first pose.
-    pub lio_t_world: Option<Isometry3<f64>>,
     counts: Counts,
     windows: usize,
     /// Per true posture: (visible, found); per detected posture: (true, false positives).
@@ -80,9 +75,9 @@ pub struct Scorer {
     err_m: Vec<f64>,
     err_deg: Vec<f64>,
     err_series: Vec<(f64, f64)>,
-    /// Each robot LIO pose's error against the truth (m, deg).
-    robot_err_m: Vec<f64>,
-    robot_err_deg: Vec<f64>,
+    /// The robot's LIO poses against its true path; its first pose ties the robot's LIO world
+    /// to the truth's ([`Self::lio_t_world`]).
+    robot_odom: OdometryLog,
     inlier_series: Vec<(f64, f64)>,
     frame_rows: Vec<String>,
     projected: Vec<ProjectedPoint>,
@@ -90,10 +85,8 @@ pub struct Scorer {
     robot_ns: Option<u64>,
     /// (robot time, traversable floor known, m^2), every `EXPLORED_EVERY_NS`.
     explored: Vec<(u64, f64)>,
-    /// Each robot pose's time and error, and the LIO's health when the run reports it.
-    robot_series: Vec<(u64, f64, Option<Health>)>,
     /// The rig's own LIO poses against its true path (offline runs).
-    rig_lio: RigLioLog,
+    rig_lio: OdometryLog,
     detected: DetectedLog,
     pending: VecDeque<PendingFrame>,
     overlay: OverlayTally,
@@ -103,7 +96,6 @@ impl Scorer {
     pub fn new(truth: Truth) -> Self {
         Self {
             truth,
-            lio_t_world: None,
             counts: Counts::default(),
             windows: 0,
             per_true_pose: BTreeMap::new(),
@@ -125,8 +117,7 @@ impl Scorer {
             err_m: Vec::new(),
             err_deg: Vec::new(),
             err_series: Vec::new(),
-            robot_err_m: Vec::new(),
-            robot_err_deg: Vec::new(),
+            robot_odom: OdometryLog::default(),
             inlier_series: Vec::new(),
             frame_rows: vec![
                 "frame,time_s,aligned,detections,age_ms,points_in_image,points_in_mask,pose_error_m,pose_error_deg,render_ms"
@@ -135,8 +126,7 @@ impl Scorer {
             projected: Vec::new(),
             robot_ns: None,
             explored: Vec::new(),
-            robot_series: Vec::new(),
-            rig_lio: RigLioLog::default(),
+            rig_lio: OdometryLog::default(),
             detected: DetectedLog::default(),
             pending: VecDeque::new(),
             overlay: OverlayTally::default(),
@@ -148,11 +138,7 @@ impl Scorer {
     /// scored against the truth in it. The robot reports a scan's detection before its pose.
     pub fn robot_pose(&mut self, end_ns: u64, lidar_pose: &Isometry3<f64>, health: Option<Health>) {
         let truth = at(&self.truth.gt_robot, end_ns);
-        let l_t_w = *self.lio_t_world.get_or_insert_with(|| lidar_pose * truth.inverse());
-        let (m, deg) = pose_error(&(l_t_w * truth), lidar_pose);
-        self.robot_err_m.push(m);
-        self.robot_series.push((end_ns, m, health));
-        self.robot_err_deg.push(deg);
+        self.robot_odom.push(end_ns, lidar_pose, &truth, health);
         self.robot_ns = Some(self.robot_ns.map_or(end_ns, |t| t.max(end_ns)));
     }
 
@@ -175,30 +161,16 @@ impl Scorer {
         }
     }
 
-    /// Per robot scan: time since the first, pose error against the truth and the LIO's health
-    /// (empty where the run did not report it), for finding where an odometry went wrong.
-    fn robot_error_csv(&self) -> String {
-        error_csv(self.robot_series.iter().zip(&self.robot_err_deg).map(|(&(t, m, h), &deg)| (t, m, deg, h)))
-    }
-
-    /// The robot's drift stretches (10 cm within 5 s), when the run reported its health.
-    fn drift(&self) -> Option<DriftReport> {
-        let poses: Vec<ScoredPose> = self
-            .robot_series
-            .iter()
-            .filter_map(|&(t_ns, error_m, health)| Some(ScoredPose { t_ns, error_m, health: health? }))
-            .collect();
-        if poses.is_empty() {
-            return None;
-        }
-        Some(drift_stretches(&poses, DRIFT_WINDOW_NS, DRIFT_GROW_M))
+    /// The robot's LIO world from the truth's world, fixed at the robot's first pose.
+    pub fn lio_t_world(&self) -> Option<Isometry3<f64>> {
+        self.robot_odom.frame_t_world()
     }
 
     /// One pose of the rig's own LIO (its odometry frame) with its health, scored against the
-    /// rig's true path ([`crate::rig_lio`]).
+    /// rig's true path ([`crate::odometry`]).
     pub fn rig_lio_pose(&mut self, end_ns: u64, odom: &Isometry3<f64>, health: Health) {
         let truth = at(&self.truth.gt_fpv, end_ns);
-        self.rig_lio.push(end_ns, odom, &truth, health);
+        self.rig_lio.push(end_ns, odom, &truth, Some(health));
     }
 
     /// The rig's first LIO pose (alignment times count from it).
@@ -209,7 +181,7 @@ impl Scorer {
     /// One rig scan, to find when the rig first sees the robot's map ([`crate::map_sight`]);
     /// `map` gives the robot's map (its LIO world) as it stands, asked for only when it changed.
     pub fn rig_scan(&mut self, scan: &LioScan, map_len: usize, map: impl FnOnce() -> Vec<Vector3<f64>>) {
-        let (Some(first), Some(l_t_w)) = (self.rig_first_ns, self.lio_t_world) else { return };
+        let (Some(first), Some(l_t_w)) = (self.rig_first_ns, self.lio_t_world()) else { return };
         let Some(since_ns) = scan.end_ns.checked_sub(first) else { return };
         if self.sight.wants_map(map_len, scan.end_ns) {
             self.sight.set_map(map(), scan.end_ns);
@@ -220,7 +192,7 @@ impl Scorer {
 
     /// One detection window of the robot, matched against the true people.
     pub fn detection(&mut self, d: &RobotDetection) {
-        let Some(l_t_w) = self.lio_t_world else { return };
+        let Some(l_t_w) = self.lio_t_world() else { return };
         let boxes = people_at(&self.truth.people, d.stamp_ns);
         let truth_people = truth_in_world(&boxes, &l_t_w, &d.points, self.truth.robot_returns.as_ref());
         let rule = MatchRule::default();
@@ -298,14 +270,14 @@ impl Scorer {
         self.attempts += 1;
         self.align_ms.push(total_ms);
         if !accepted {
-            if let Some(l_t_w) = self.lio_t_world.as_ref().filter(|_| total_ms.is_finite()) {
+            if let Some(l_t_w) = self.lio_t_world().filter(|_| total_ms.is_finite()) {
                 let (m, deg) = pose_error(world_t_lidar, &(l_t_w * at(&self.truth.gt_fpv, end_ns)));
                 tracing::debug!(error_m = m, error_deg = deg, "rig alignment refused");
             }
             return;
         }
         self.accepted += 1;
-        if let Some(l_t_w) = &self.lio_t_world {
+        if let Some(l_t_w) = self.lio_t_world() {
             let (m, deg) = pose_error(world_t_lidar, &(l_t_w * at(&self.truth.gt_fpv, end_ns)));
             tracing::info!(error_m = m, error_deg = deg, "rig alignment accepted");
             let since_ns = end_ns.saturating_sub(self.rig_first_ns.unwrap_or(end_ns));
@@ -336,7 +308,7 @@ impl Scorer {
                 let (w, h) = (mask.width, mask.height);
                 (in_mask, in_image) = ar::mask_inlier_ratio(&self.projected, &mask.pixels, w, h);
                 // The same people through the true camera pose: what detection alone scores.
-                if let Some(l_t_w) = &self.lio_t_world {
+                if let Some(l_t_w) = self.lio_t_world() {
                     let mut with_truth = Vec::new();
                     ar::project_people(camera, &(l_t_w * f.world_t_camera), &view.people, &mut with_truth);
                     true_pose = ar::mask_inlier_ratio(&with_truth, &mask.pixels, w, h);
@@ -344,7 +316,7 @@ impl Scorer {
             }
         }
         let rig_pose = view.aligned.then(|| view.world_t_camera * self.truth.mount.lidar_t_camera.inverse());
-        let pose_error = match (rig_pose, &self.lio_t_world) {
+        let pose_error = match (rig_pose, self.lio_t_world()) {
             (Some(p), Some(l_t_w)) => Some(pose_error(&p, &(l_t_w * at(&self.truth.gt_fpv, f.t_ns)))),
             _ => None,
         };
@@ -465,13 +437,8 @@ impl Scorer {
                 translation_m: quantiles(&self.err_m),
                 rotation_deg: quantiles(&self.err_deg),
             },
-            robot_pose_error: RobotPoseErrorReport {
-                translation_m: quantiles(&self.robot_err_m),
-                rotation_deg: quantiles(&self.robot_err_deg),
-                rmse_m: rmse(&self.robot_err_m),
-                drift: self.drift(),
-            },
-            rig_lio_error: self.rig_lio.report(),
+            robot_pose_error: self.robot_odom.report(),
+            rig_lio_error: (!self.rig_lio.is_empty()).then(|| self.rig_lio.report()),
             exploration: self.exploration(),
             latency_ms: latency,
             memory,
@@ -479,7 +446,7 @@ impl Scorer {
         };
         report.write(&out.join("report.json"))?;
         write(&out.join("frames.csv"), self.frame_rows.join("\n") + "\n")?;
-        write(&out.join("robot_error.csv"), self.robot_error_csv())?;
+        write(&out.join("robot_error.csv"), self.robot_odom.csv())?;
         if report.rig_lio_error.is_some() {
             write(&out.join("rig_error.csv"), self.rig_lio.csv())?;
         }
