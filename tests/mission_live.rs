@@ -104,6 +104,8 @@ fn the_live_mission_links_the_nodes_and_aligns_the_rig() {
             .arg("--truth")
             .arg(dir.path())
             .arg("--no-wall-timing")
+            // As the live run above: its first alignment at once.
+            .args(["--confirm-first-s", "0"])
             .output()
             .unwrap();
         let stdout = String::from_utf8_lossy(&out.stdout);

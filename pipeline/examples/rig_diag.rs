@@ -154,6 +154,16 @@ fn main() {
                     a.accepted,
                     Reasons(&a.rejected_because)
                 );
+                if let Some(k) = &a.known_fit {
+                    println!("      known here: share {:.3} score {:.3}", k.known_share, k.score_on_known);
+                }
+                for r in &a.rivals {
+                    let (tm, td) = pose_error(&(r.pose * o.frame_t_lidar), &truth);
+                    println!(
+                        "      rival {:5.1} m {:4.0} deg (truth {:5.2} m {:5.1} deg): score {:.3} known {:.3} on known {:.3}",
+                        r.off_m, r.off_deg, tm, td, r.score, r.fit.known_share, r.fit.score_on_known
+                    );
+                }
                 for p in &a.alternatives {
                     println!(
                         "      alt seed {:+4.0}: moved {:.2} m {:.1} deg rms {:.4} inl {:.3}",

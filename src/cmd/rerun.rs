@@ -33,6 +33,11 @@ pub struct Args {
     /// alone.
     #[arg(long)]
     pub no_wall_timing: bool,
+    /// Apply the rig's first alignment once searches have found it again over this long (s; 0:
+    /// the first accepted one at once), as `starc sim --confirm-first-s` ran it. Default: the
+    /// rig node config's, else 3 s.
+    #[arg(long)]
+    pub confirm_first_s: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -47,10 +52,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let first = args.recordings.first().cloned().unwrap_or_default();
     let out = args.out.clone().unwrap_or_else(|| first.with_file_name("rerun"));
     let inputs = starc_bridge::from_recordings(&args.recordings)?;
-    let run = match (&args.truth, &args.fpv_config) {
+    let mut run = match (&args.truth, &args.fpv_config) {
         (Some(dir), _) => with_truth(dir, out, &args)?,
         (None, config) => without_truth(config.as_deref(), out, &args)?,
     };
+    if let Some(s) = args.confirm_first_s {
+        if !(s.is_finite() && s >= 0.0) {
+            bail!("--confirm-first-s must be a number of seconds, at least 0 (got {s})");
+        }
+        run.confirm_first_s = s;
+    }
     print!("{}", offline::run(inputs, run)?);
     Ok(())
 }

@@ -159,6 +159,20 @@ pub struct AlignConfig {
     pub correlative_margin: f64,
     /// Whether the places the stage found are also tried as seeds (first), or only judge.
     pub correlative_as_seeds: bool,
+    /// Places that fit only the part of the map they land on: the best `correlative_rivals`
+    /// distinct places where the rig could stand (space the robot saw through), scoring at
+    /// least `correlative_rival_min_score` with `correlative_rival_free_penalty` for each point
+    /// where the robot saw through (0: off), are judged on the window's points that land on
+    /// cells the map knows (its structure or the space the robot saw through). One with at least
+    /// `correlative_rival_min_known` of the window on known cells and a mean value there within
+    /// `correlative_rival_margin` of the accepted place's refuses it: a building whose mapped
+    /// half mirrors the half the rig stands in fits the view there fully, and at the truth only
+    /// where the robot has been, but as well.
+    pub correlative_rivals: usize,
+    pub correlative_rival_min_score: f64,
+    pub correlative_rival_free_penalty: f64,
+    pub correlative_rival_min_known: f64,
+    pub correlative_rival_margin: f64,
     /// Free-space check of a result that passed the other tests, when the source comes with its
     /// rays ([`crate::align::Aligner::align_with_rays`]): at most this many rays are walked
     /// through the map (0: off), and the result is rejected when more than
@@ -244,7 +258,12 @@ impl Default for AlignConfig {
             correlative_free_penalty: 1.0,
             correlative_min_score: 0.2,
             correlative_margin: 0.05,
-            correlative_as_seeds: false,
+            correlative_as_seeds: true,
+            correlative_rivals: 12,
+            correlative_rival_min_score: 0.05,
+            correlative_rival_free_penalty: 4.0,
+            correlative_rival_min_known: 0.4,
+            correlative_rival_margin: 0.05,
             free_space_rays: 400,
             free_space_max_blocked: 0.1,
             free_space_step_m: 0.1,
@@ -359,6 +378,13 @@ impl AlignConfig {
         if !non_negative.iter().all(|v| v.is_finite() && *v >= 0.0) {
             return bad(
                 "correlative_free_penalty, correlative_min_score and correlative_margin must be finite and at least 0",
+            );
+        }
+        let rival = [self.correlative_rival_min_score, self.correlative_rival_min_known, self.correlative_rival_margin];
+        let penalty_ok = self.correlative_rival_free_penalty.is_finite() && self.correlative_rival_free_penalty >= 0.0;
+        if !(penalty_ok && rival.iter().all(|v| (0.0..=1.0).contains(v))) {
+            return bad(
+                "correlative_rival_min_score, _min_known and _margin must be in [0, 1], _free_penalty at least 0",
             );
         }
         if self.seed_max_points == 0 || self.max_full_attempts == 0 {

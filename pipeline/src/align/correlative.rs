@@ -47,6 +47,9 @@ pub struct CorrelativeParams {
     pub min_score: f64,
     /// Nodes taken from the queue, at most (bounds the time on a map with many equal places).
     pub max_expansions: usize,
+    /// Only places whose origin (the rig's sensor) stands where the target's sensor saw
+    /// through: inside what the robot has seen, not outside the building or inside a wall.
+    pub standing_only: bool,
 }
 
 /// A place found: the source's pose in the target (level, at the target's floor height) and
@@ -65,6 +68,8 @@ pub struct TargetGrid {
     height: usize,
     floor_m: f64,
     levels: Vec<Vec<f32>>,
+    /// With `standing_only`: per level, 1 where the block holds a cell the origin may stand in.
+    standable: Vec<Vec<f32>>,
 }
 
 impl TargetGrid {
@@ -84,8 +89,13 @@ impl TargetGrid {
             tracing::debug!(width, height, "correlative stage off: the map's grid would be too large");
             return None;
         }
-        let mut g = Self { origin_m, cell_m: p.cell_m, width, height, floor_m, levels: Vec::new() };
+        let mut g =
+            Self { origin_m, cell_m: p.cell_m, width, height, floor_m, levels: Vec::new(), standable: Vec::new() };
         let values = g.values(&band, coverage, p);
+        if p.standing_only {
+            let seen_through = values.iter().map(|&v| if v < 0.0 { 1.0 } else { 0.0 }).collect();
+            g.standable = pooled_levels(seen_through, width, height);
+        }
         g.levels = pooled_levels(values, width, height);
         Some(g)
     }
@@ -183,6 +193,31 @@ impl TargetGrid {
         f64::from(sum) / band.points.len().max(1) as f64
     }
 
+    /// How the band lands at `pose` on what the target knows: the share of its points on known
+    /// cells (structure, beside it, or seen through; a point where the target never looked says
+    /// nothing) and their mean value there (1 on structure, negative where seen through).
+    pub fn known_fit(&self, band: &SourceBand, pose: &Isometry3<f64>) -> KnownFit {
+        let (s, c) = pose.rotation.euler_angles().2.sin_cos();
+        let (mut known, mut sum) = (0usize, 0.0f64);
+        for q in &band.points {
+            let x = c * q[0] - s * q[1] + pose.translation.x;
+            let y = s * q[0] + c * q[1] + pose.translation.y;
+            let v = self.value_at(x, y);
+            if v != 0.0 {
+                known += 1;
+                sum += f64::from(v);
+            }
+        }
+        let n = band.points.len().max(1) as f64;
+        KnownFit { known_share: known as f64 / n, score_on_known: sum / known.max(1) as f64 }
+    }
+
+    /// The level-0 value of the cell under (x, y): 0 outside the grid.
+    pub fn value_at(&self, x_m: f64, y_m: f64) -> f32 {
+        let grid = self.levels.first();
+        self.cell_of(x_m, y_m).and_then(|i| grid.and_then(|g| g.get(i))).copied().unwrap_or(0.0)
+    }
+
     /// The best distinct places of `source` (level, in its own frame) in the target, its origin
     /// searched over the target's extent in the band.
     pub fn search(&self, source: &[Vec3], p: &CorrelativeParams) -> Vec<Peak> {
@@ -203,7 +238,7 @@ impl TargetGrid {
             for tx in (lo..w).step_by(block as usize) {
                 for ty in (lo..h).step_by(block as usize) {
                     let bound = self.sum(top, cells, tx, ty);
-                    if f64::from(bound) >= min_sum {
+                    if f64::from(bound) >= min_sum && self.may_stand(p, top, tx, ty) {
                         queue.push(Node { bound, yaw: yi, level: top, tx, ty });
                     }
                 }
@@ -232,12 +267,24 @@ impl TargetGrid {
                     continue;
                 }
                 let bound = self.sum(level, cells, tx, ty);
-                if f64::from(bound) >= min_sum {
+                if f64::from(bound) >= min_sum && self.may_stand(p, level, tx, ty) {
                     queue.push(Node { bound, yaw: n.yaw, level, tx, ty });
                 }
             }
         }
         peaks
+    }
+
+    /// Whether the block of origins at (tx, ty) of `level` holds one the search may take.
+    fn may_stand(&self, p: &CorrelativeParams, level: usize, tx: i64, ty: i64) -> bool {
+        if !p.standing_only {
+            return true;
+        }
+        let (w, h) = (self.width as i64, self.height as i64);
+        if tx < 0 || ty < 0 || tx >= w || ty >= h {
+            return false;
+        }
+        self.standable.get(level).and_then(|g| g.get((ty * w + tx) as usize)).is_some_and(|&v| v > 0.0)
     }
 
     /// The cells the source points fall in, turned by `yaw` (rad), relative to its origin's cell.
@@ -274,6 +321,13 @@ impl TargetGrid {
         let y = self.origin_m[1] + n.ty as f64 * self.cell_m;
         Isometry3::from_parts(Translation3::new(x, y, z_m), UnitQuaternion::from_euler_angles(0.0, 0.0, yaw))
     }
+}
+
+/// A band's fit on the part of the target that is known ([`TargetGrid::known_fit`]).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct KnownFit {
+    pub known_share: f64,
+    pub score_on_known: f64,
 }
 
 /// The source's points the search matches (2D, its own frame), and its floor's height.
@@ -404,6 +458,7 @@ mod tests {
             max_source_points: 400,
             min_score: 0.2,
             max_expansions: 200_000,
+            standing_only: false,
         }
     }
 
@@ -434,26 +489,61 @@ mod tests {
         pts
     }
 
-    #[test]
-    fn finds_the_place_of_a_view_from_anywhere() {
-        let map = rooms();
-        let grid = TargetGrid::new(&map, None, &params()).unwrap();
-        // The rig stands at (2, 6) turned 130 deg, 1.2 m above the map's frame: its view is the
-        // map moved into its frame, cut to what lies within 6 m.
+    /// The rig stands at (2, 6) turned 130 deg, 1.2 m above the map's frame: its view is the
+    /// map moved into its frame, cut to what lies within 6 m; and that pose.
+    fn view_from_2_6(map: &[Vec3]) -> (Vec<Vec3>, Isometry3<f64>) {
         let truth = Isometry3::from_parts(
             Translation3::new(2.0, 6.0, 1.2),
             UnitQuaternion::from_euler_angles(0.0, 0.0, 130f64.to_radians()),
         );
-        let view: Vec<Vec3> = map
+        let view = map
             .iter()
             .map(|p| truth.inverse_transform_point(&(*p).into()).coords)
             .filter(|q| q.xy().norm() < 6.0)
             .collect();
+        (view, truth)
+    }
+
+    #[test]
+    fn finds_the_place_of_a_view_from_anywhere() {
+        let map = rooms();
+        let grid = TargetGrid::new(&map, None, &params()).unwrap();
+        let (view, truth) = view_from_2_6(&map);
         let peaks = grid.search(&view, &params());
         let best = peaks.first().unwrap();
         let (m, deg) = super::super::geometry::pose_error(&best.pose, &truth);
         assert!(m < 0.35 && deg < 3.0, "best peak {m:.2} m {deg:.1} deg off ({:.2})", best.score);
         assert!(best.score > 0.8, "{}", best.score);
+    }
+
+    #[test]
+    fn standing_only_places_stand_where_the_robot_saw_through_and_known_fit_counts_what_is_known() {
+        let map = rooms();
+        // The robot saw through the lower room only (y under 4 m, x under 8 m).
+        let mut coverage = Coverage::new(0.25);
+        for x in 1..32 {
+            for y in 1..16 {
+                for k in 2..8 {
+                    let p = Vec3::new(f64::from(x) * 0.25, f64::from(y) * 0.25, f64::from(k) * 0.25);
+                    coverage.set_crossings(crate::voxel_hash::key_of(&p, 4.0), 5);
+                }
+            }
+        }
+        let (view, truth) = view_from_2_6(&map);
+        let p = CorrelativeParams { standing_only: true, peaks: 5, min_score: 0.05, ..params() };
+        let grid = TargetGrid::new(&map, Some(&coverage), &p).unwrap();
+        let peaks = grid.search(&view, &p);
+        assert!(!peaks.is_empty());
+        for peak in &peaks {
+            let (x, y) = (peak.pose.translation.x, peak.pose.translation.y);
+            assert!(grid.value_at(x, y) < 0.0, "a place at ({x:.2}, {y:.2}) the robot did not see through");
+        }
+        // The truth stands where the robot never looked: not a standing place, but its view
+        // fits what the map knows there.
+        assert!(peaks.iter().all(|q| super::super::geometry::pose_error(&q.pose, &truth).0 > 0.5));
+        let band = grid.source_band(&view, &p).unwrap();
+        let fit = grid.known_fit(&band, &truth);
+        assert!(fit.known_share > 0.5 && fit.score_on_known > 0.7, "{fit:?}");
     }
 
     #[test]

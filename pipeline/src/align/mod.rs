@@ -28,6 +28,7 @@ mod tiles;
 
 pub use carve::seen_through;
 pub use config::AlignConfig;
+pub use correlative::KnownFit;
 pub use coverage::{Coverage, Overlap};
 pub use free_space::{FreeSpace, Ray};
 pub use geometry::{
@@ -38,7 +39,8 @@ pub use map::{
     Placed, PlacedPoint, PreparedMap, WindowConfig,
 };
 pub use register::{
-    yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Seed, SeedOrigin, WeakDirection,
+    yaw_offsets_deg, AlignMetrics, AlignReport, Aligner, Attempt, PinnedCheck, Probe, Rival, Seed, SeedOrigin,
+    WeakDirection,
 };
 pub use rejection::{slide_words, AlignFailure, Reasons, Rejection};
 pub use tiles::{decode_tile, encode_tile, encode_tiles, Tile, TileCoverage, TileMap, MAX_TILE_POINTS};

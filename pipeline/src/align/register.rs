@@ -2,7 +2,7 @@
 //! seed, acceptance, and the yaw-grid reseeding around the circle.
 
 use super::config::AlignConfig;
-use super::correlative::{CorrelativeParams, Peak, SourceBand, TargetGrid};
+use super::correlative::{CorrelativeParams, KnownFit, Peak, SourceBand, TargetGrid};
 use super::coverage::{Coverage, Overlap};
 use super::free_space::{FreeSpace, Ray, RayParams, SurfelGrid};
 use super::geometry::{estimate_normals, pose_rows, thin, Vec3, VoxelIndex};
@@ -123,6 +123,24 @@ pub struct Attempt {
     pub pinned: Option<PinnedCheck>,
     /// The source against the robot's map and coverage (only when the aligner has coverage).
     pub overlap: Option<Overlap>,
+    /// Other places judged on what the map knows there (`correlative_rivals`; only for an
+    /// attempt that passed every other test).
+    pub rivals: Vec<Rival>,
+    /// This attempt's own fit on what the map knows (with `rivals`).
+    pub known_fit: Option<KnownFit>,
+}
+
+/// Another place of the view, judged on the part of the map it lands on.
+#[derive(Clone, Debug, Serialize)]
+pub struct Rival {
+    /// Its score in the rival search (a share of the view's points).
+    pub score: f64,
+    pub fit: KnownFit,
+    /// How far from the accepted place (m, deg).
+    pub off_m: f64,
+    pub off_deg: f64,
+    #[serde(skip)]
+    pub pose: Isometry3<f64>,
 }
 
 /// Whether what a degenerate result explains pins it down: the result is moved along each of
@@ -369,6 +387,9 @@ impl Aligner {
         if let Some(a) = attempts.iter_mut().find(|a| a.accepted) {
             if let Some(search) = search.or_else(|| self.correlative_search(src.icp)) {
                 self.check_elsewhere(&search, a);
+                if a.accepted {
+                    self.check_rivals(&search, a);
+                }
             }
         }
         (attempts, seeds, seed_ms)
@@ -635,7 +656,17 @@ impl Aligner {
         if c.correlative_seeds == 0 {
             return None;
         }
-        let params = CorrelativeParams {
+        let params = self.correlative_params();
+        let grid = TargetGrid::new(&self.icp_target.index.points, self.coverage.as_deref(), &params)?;
+        let band = grid.source_band(source, &params)?;
+        let peaks = grid.search_band(&band, &params);
+        tracing::debug!(scores = ?peaks.iter().map(|p| p.score).collect::<Vec<_>>(), "correlative peaks");
+        Some(CorrelativeSearch { grid, band, peaks })
+    }
+
+    fn correlative_params(&self) -> CorrelativeParams {
+        let c = &self.config;
+        CorrelativeParams {
             cell_m: c.correlative_cell_m,
             peaks: c.correlative_seeds,
             free_penalty: c.correlative_free_penalty,
@@ -643,12 +674,8 @@ impl Aligner {
             max_source_points: c.seed_max_points,
             min_score: c.correlative_min_score,
             max_expansions: CORRELATIVE_MAX_EXPANSIONS,
-        };
-        let grid = TargetGrid::new(&self.icp_target.index.points, self.coverage.as_deref(), &params)?;
-        let band = grid.source_band(source, &params)?;
-        let peaks = grid.search_band(&band, &params);
-        tracing::debug!(scores = ?peaks.iter().map(|p| p.score).collect::<Vec<_>>(), "correlative peaks");
-        Some(CorrelativeSearch { grid, band, peaks })
+            standing_only: false,
+        }
     }
 
     /// The correlative stage's places, best first, as seeds scored (not refined) on the last
@@ -711,6 +738,61 @@ impl Aligner {
                 margin,
             });
         }
+    }
+
+    /// An accepted attempt must fit what the map knows at least as well as any other place, where
+    /// the rig could stand, fits what the map knows there (`correlative_rivals`): where the
+    /// robot mapped one half of a symmetric building and only glimpsed the other, a view of the
+    /// glimpsed half fits the mapped half fully and its own place only where the robot looked,
+    /// and both are consistent.
+    fn check_rivals(&self, search: &CorrelativeSearch, a: &mut Attempt) {
+        let c = &self.config;
+        if c.correlative_rivals == 0 {
+            return;
+        }
+        let here = search.grid.known_fit(&search.band, &a.pose);
+        a.known_fit = Some(here);
+        a.rivals = self.rivals(search, &a.pose);
+        let rival = a.rivals.iter().find(|r| {
+            r.fit.known_share >= c.correlative_rival_min_known
+                && r.fit.score_on_known >= here.score_on_known - c.correlative_rival_margin
+        });
+        if let Some(r) = rival {
+            a.accepted = false;
+            a.rejected_because.push(Rejection::PartlyMappedRival {
+                off_m: r.off_m,
+                off_deg: r.off_deg,
+                known_share: r.fit.known_share,
+                score_on_known: r.fit.score_on_known,
+                here_score_on_known: here.score_on_known,
+            });
+        }
+    }
+
+    /// Places other than `pose` where the rig could stand (its origin where the robot saw
+    /// through), searched with seen-through space costing `correlative_rival_free_penalty`, each
+    /// judged on what the map knows there.
+    fn rivals(&self, search: &CorrelativeSearch, pose: &Isometry3<f64>) -> Vec<Rival> {
+        let c = &self.config;
+        let params = CorrelativeParams {
+            peaks: c.correlative_rivals,
+            min_score: c.correlative_rival_min_score,
+            free_penalty: c.correlative_rival_free_penalty,
+            standing_only: true,
+            ..self.correlative_params()
+        };
+        let Some(grid) = TargetGrid::new(&self.icp_target.index.points, self.coverage.as_deref(), &params) else {
+            return Vec::new();
+        };
+        grid.search_band(&search.band, &params)
+            .into_iter()
+            .map(|peak| {
+                let (off_m, off_deg) = super::geometry::pose_error(&peak.pose, pose);
+                let fit = search.grid.known_fit(&search.band, &peak.pose);
+                Rival { score: peak.score, fit, off_m, off_deg, pose: peak.pose }
+            })
+            .filter(|r| r.off_m >= CORRELATIVE_SAME_M || r.off_deg >= CORRELATIVE_SAME_DEG)
+            .collect()
     }
 
     /// The seeds refined on the coarse levels, best score first.
@@ -798,6 +880,8 @@ impl Aligner {
             free_space,
             pinned,
             overlap,
+            rivals: Vec::new(),
+            known_fit: None,
         }
     }
 

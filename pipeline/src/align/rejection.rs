@@ -45,6 +45,11 @@ pub enum Rejection {
     /// Searched over the whole map (the correlative stage), another place explains the view
     /// about as well: `score` there against `here_score` here (shares of the view's points).
     ElsewhereAsGood { off_m: f64, off_deg: f64, score: f64, here_score: f64, margin: f64 },
+    /// Another place, where the rig could stand, fits the part of the map it lands on as well as
+    /// this one fits: the view may be of a part of the building the robot has mapped only there
+    /// (`known_share` of the view on known cells at the other place, their mean value
+    /// `score_on_known` against `here_score_on_known`).
+    PartlyMappedRival { off_m: f64, off_deg: f64, known_share: f64, score_on_known: f64, here_score_on_known: f64 },
     /// Too many of the window's rays cross a mapped surface before their end.
     SeesThroughMap { blocked: usize, rays: usize, max_ratio: f64 },
 }
@@ -89,6 +94,11 @@ impl fmt::Display for Rejection {
             Self::ElsewhereAsGood { off_m, off_deg, score, here_score, margin } => write!(
                 f,
                 "another place {off_m:.1} m / {off_deg:.0} deg away explains the view as well over the whole map (score {score:.3} vs {here_score:.3} here, margin {margin})"
+            ),
+            Self::PartlyMappedRival { off_m, off_deg, known_share, score_on_known, here_score_on_known } => write!(
+                f,
+                "a place {off_m:.1} m / {off_deg:.0} deg away fits what the map knows there as well ({:.0} % of the view on mapped space, score {score_on_known:.3} vs {here_score_on_known:.3} here)",
+                known_share * 100.0
             ),
             Self::SeesThroughMap { blocked, rays, max_ratio } => write!(
                 f,

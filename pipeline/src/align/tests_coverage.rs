@@ -133,3 +133,57 @@ fn a_view_that_fits_two_places_on_the_map_is_refused() {
     let report = Aligner::new(&map, blind).unwrap().align(&source, &Isometry3::identity());
     assert!(report.accepted, "{:?}", report.best().map(|a| &a.rejected_because));
 }
+
+/// A 20 x 6 m hall of two rooms split at x = 10 by a wall with a door, the same turned 180 deg
+/// about its centre (a cupboard in each, where the turn puts it), 2.5 m high, with a floor.
+fn twin_halves() -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, a, b, f64::MAX);
+    segment((0.0, 0.0), (20.0, 0.0));
+    segment((20.0, 0.0), (20.0, 6.0));
+    segment((20.0, 6.0), (0.0, 6.0));
+    segment((0.0, 6.0), (0.0, 0.0));
+    segment((10.0, 0.0), (10.0, 2.4));
+    segment((10.0, 3.6), (10.0, 6.0));
+    for (x0, y0, s) in [(2.0, 4.0, 1.0), (18.0, 2.0, -1.0)] {
+        segment((x0, y0), (x0 + s, y0));
+        segment((x0 + s, y0), (x0 + s, y0 + s));
+    }
+    for i in 0..=200 {
+        for j in 0..=60 {
+            pts.push(Vec3::new(f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
+        }
+    }
+    pts
+}
+
+#[test]
+fn a_view_of_the_half_the_robot_glimpsed_is_not_placed_in_its_mapped_twin() {
+    let hall = twin_halves();
+    // The robot mapped the left room from (5, 3) and, through the door, glimpsed the right one:
+    // the walls within 3 m of the door, and the air beyond (returns too sparse to map).
+    let map: Vec<Vec3> = hall.iter().filter(|p| p.x <= 15.0).copied().collect();
+    let mut coverage = Coverage::new(0.25);
+    for p in map.iter().filter(|p| p.x <= 10.0).step_by(3) {
+        coverage.add_ray(&Vec3::new(5.0, 3.0, 1.2), p);
+    }
+    for (i, k) in (0..=20).flat_map(|i| (0..=6).map(move |k| (i, k))) {
+        let end = Vec3::new(17.0, 1.0 + f64::from(i) * 0.2, 0.5 + f64::from(k) * 0.25);
+        coverage.add_ray(&Vec3::new(9.0, 3.0, 1.2), &end);
+    }
+    let coverage = Arc::new(coverage);
+    // The rig stands in the right room, which it sees whole.
+    let truth = pose_xyz_yaw(13.5, 3.0, 1.4, 200.0);
+    let source: Vec<Vec3> =
+        hall.iter().filter(|p| p.x >= 10.0).map(|p| truth.inverse_transform_point(&Point3::from(*p)).coords).collect();
+    let blind = AlignConfig { correlative_rivals: 0, ..AlignConfig::default() };
+    let report =
+        Aligner::new(&map, blind).unwrap().with_coverage(Arc::clone(&coverage)).align(&source, &Isometry3::identity());
+    let (off_m, _) = pose_error(&report.pose, &truth);
+    assert!(report.accepted && off_m > 5.0, "without the rivals the mirror image is taken: {off_m} m");
+    let aligner = Aligner::new(&map, AlignConfig::default()).unwrap().with_coverage(coverage);
+    let report = aligner.align(&source, &Isometry3::identity());
+    let why: Vec<&Rejection> = report.attempts.iter().flat_map(|a| &a.rejected_because).collect();
+    assert!(!report.accepted, "{:?}", report.best().map(|a| (&a.rivals, a.known_fit)));
+    assert!(why.iter().any(|r| matches!(r, Rejection::PartlyMappedRival { .. })), "{why:?}");
+}

@@ -38,6 +38,7 @@ impl Waiting {
         }
         if let Some(off_m) = because.iter().find_map(|r| match r {
             Rejection::ElsewhereAsGood { off_m, .. } => Some(*off_m),
+            Rejection::PartlyMappedRival { off_m, .. } => Some(*off_m),
             _ => None,
         }) {
             return Self::Lookalike { off_m };
@@ -107,5 +108,13 @@ mod tests {
         let w = Waiting::from_failure(&lookalike);
         assert_eq!(w, Waiting::Lookalike { off_m: 1.8 });
         assert_eq!(w.to_string(), "map has a lookalike 1.8 m away: keep moving");
+        let mirror = refused(vec![Rejection::PartlyMappedRival {
+            off_m: 16.2,
+            off_deg: 179.5,
+            known_share: 0.45,
+            score_on_known: 0.88,
+            here_score_on_known: 0.89,
+        }]);
+        assert_eq!(Waiting::from_failure(&mirror), Waiting::Lookalike { off_m: 16.2 });
     }
 }
