@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Summarise `rig_diag` outputs (one file per building, NEVER_APPLY=1 NO_HINT=1).
+
+    scripts/rig_diag_summary.py OUT...                  per building: searches, the attempt from
+                                                        the truth right, searches right / wrong
+    scripts/rig_diag_summary.py --rivals K M OUT...     replay the rival rule on the rivals each
+                                                        accepted attempt recorded (run rig_diag with
+                                                        correlative_rival_min_known = 1 to record
+                                                        them without refusing): a search is refused
+                                                        when a rival has at least K of the window on
+                                                        known cells and fits within M of the result
+
+A search is right within 10 cm and 1 deg of the truth, near within 0.5 m and 3 deg, far beyond.
+"""
+import argparse
+import collections
+import re
+import sys
+
+SEARCH = re.compile(r'== t\s+([\d.]+) s')
+ATTEMPT = re.compile(r'\s+att\d+ .*err\s+([\d.]+) m\s+([\d.]+) deg')
+HERE = re.compile(r'\s+known here: share ([\d.]+) score ([-\d.]+)')
+RIVAL = re.compile(r'\s+rival\s+([\d.]+) m\s+([\d.]+) deg .*known ([\d.]+) on known ([-\d.]+)')
+TRUTH = re.compile(r'\s+from truth: settles ([\d.]+) m ([\d.]+) deg .*\| acc (true|false)')
+SUMMARY = re.compile(r'\s+SUMMARY t\s+[\d.]+ acc (true|false) err\s+([\d.]+) m\s+([\d.]+) deg')
+
+
+def kind(m, deg):
+    if m < 0.1 and deg < 1.0:
+        return 'right'
+    return 'near' if m < 0.5 and deg < 3.0 else 'far'
+
+
+def read(path):
+    """Per search: the truth attempt right?, the search's outcome, and the judged attempts."""
+    searches, judged, cur = [], [], None
+    for line in open(path):
+        if SEARCH.match(line):
+            searches.append({'truth_right': False, 'outcome': None})
+        elif (m := ATTEMPT.match(line)):
+            cur = {'kind': kind(float(m[1]), float(m[2])), 'here': None, 'rivals': []}
+        elif (m := HERE.match(line)) and cur is not None:
+            cur['here'] = float(m[2])
+            judged.append(cur)
+        elif (m := RIVAL.match(line)) and cur is not None and cur['here'] is not None:
+            cur['rivals'].append((float(m[3]), float(m[4])))
+        elif (m := TRUTH.match(line)) and searches:
+            searches[-1]['truth_right'] = m[3] == 'true' and kind(float(m[1]), float(m[2])) == 'right'
+        elif (m := SUMMARY.match(line)) and searches and m[1] == 'true':
+            searches[-1]['outcome'] = kind(float(m[2]), float(m[3]))
+    return searches, judged
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('--rivals', nargs=2, type=float, metavar=('K', 'M'))
+    ap.add_argument('outputs', nargs='+')
+    a = ap.parse_args()
+    total = collections.Counter()
+    for path in a.outputs:
+        searches, judged = read(path)
+        c = collections.Counter(searches=len(searches), truth_right=sum(s['truth_right'] for s in searches))
+        if a.rivals:
+            k, margin = a.rivals
+            for j in judged:
+                refused = any(known >= k and fit >= j['here'] - margin for known, fit in j['rivals'])
+                c[j['kind'] + (' refused' if refused else ' kept')] += 1
+        else:
+            c.update(s['outcome'] for s in searches if s['outcome'])
+        total.update(c)
+        print(path, dict(c))
+    print('all', dict(total))
+
+
+if __name__ == '__main__':
+    sys.exit(main())
