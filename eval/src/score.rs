@@ -12,11 +12,8 @@ use crate::ap::{class_of_pose, ApTally};
 use crate::detection::{box_returns, truth_in_world};
 use crate::error::{write, EvalError, Result};
 use crate::map_sight::MapSight;
-use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
-
-/// The explored floor area is sampled this often (robot time).
-const EXPLORED_EVERY_NS: u64 = 5_000_000_000;
 use crate::odometry::OdometryLog;
+use crate::overlay::{DetectedLog, OverlayTally, DETECTED_WITHIN_NS};
 use crate::plots::write_plots;
 use crate::quantiles::quantiles;
 use crate::report::{
@@ -33,6 +30,8 @@ use starc_pipeline::mission::{RobotDetection, View};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
 
+/// The explored floor area is sampled this often (robot time).
+const EXPLORED_EVERY_NS: u64 = 5_000_000_000;
 /// An accepted alignment this close to the truth is right (the alignment issue's goal); any
 /// other accepted one is wrong.
 const RIGHT_M: f64 = 0.10;

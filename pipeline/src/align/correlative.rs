@@ -47,9 +47,6 @@ pub struct CorrelativeParams {
     pub min_score: f64,
     /// Nodes taken from the queue, at most (bounds the time on a map with many equal places).
     pub max_expansions: usize,
-    /// Only places whose origin (the rig's sensor) stands where the target's sensor saw
-    /// through: inside what the robot has seen, not outside the building or inside a wall.
-    pub standing_only: bool,
 }
 
 /// A place found: the source's pose in the target (level, at the target's floor height) and
@@ -68,7 +65,8 @@ pub struct TargetGrid {
     height: usize,
     floor_m: f64,
     levels: Vec<Vec<f32>>,
-    /// With `standing_only`: per level, 1 where the block holds a cell the origin may stand in.
+    /// Of a [`Self::standing`] grid: per level, 1 where the block holds a cell the origin may
+    /// stand in (empty: it may stand anywhere).
     standable: Vec<Vec<f32>>,
 }
 
@@ -92,12 +90,31 @@ impl TargetGrid {
         let mut g =
             Self { origin_m, cell_m: p.cell_m, width, height, floor_m, levels: Vec::new(), standable: Vec::new() };
         let values = g.values(&band, coverage, p);
-        if p.standing_only {
-            let seen_through = values.iter().map(|&v| if v < 0.0 { 1.0 } else { 0.0 }).collect();
-            g.standable = pooled_levels(seen_through, width, height);
-        }
         g.levels = pooled_levels(values, width, height);
         Some(g)
+    }
+
+    /// The same grid with seen-through cells costing `free_penalty`, whose searches only take
+    /// places where the source's origin (the rig's sensor) stands where the target's sensor saw
+    /// through: inside what the robot has seen, not outside the building or inside a wall.
+    /// `None` when the target's sensor saw through nothing (no coverage).
+    pub fn standing(&self, free_penalty: f64) -> Option<Self> {
+        let base = self.levels.first()?;
+        let seen_through: Vec<f32> = base.iter().map(|&v| if v < 0.0 { 1.0 } else { 0.0 }).collect();
+        if !seen_through.iter().any(|&v| v > 0.0) {
+            return None;
+        }
+        let penalty = -(free_penalty as f32);
+        let values = base.iter().map(|&v| if v < 0.0 { penalty } else { v }).collect();
+        Some(Self {
+            origin_m: self.origin_m,
+            cell_m: self.cell_m,
+            width: self.width,
+            height: self.height,
+            floor_m: self.floor_m,
+            levels: pooled_levels(values, self.width, self.height),
+            standable: pooled_levels(seen_through, self.width, self.height),
+        })
     }
 
     fn cell_of(&self, x_m: f64, y_m: f64) -> Option<usize> {
@@ -238,7 +255,7 @@ impl TargetGrid {
             for tx in (lo..w).step_by(block as usize) {
                 for ty in (lo..h).step_by(block as usize) {
                     let bound = self.sum(top, cells, tx, ty);
-                    if f64::from(bound) >= min_sum && self.may_stand(p, top, tx, ty) {
+                    if f64::from(bound) >= min_sum && self.may_stand(top, tx, ty) {
                         queue.push(Node { bound, yaw: yi, level: top, tx, ty });
                     }
                 }
@@ -267,7 +284,7 @@ impl TargetGrid {
                     continue;
                 }
                 let bound = self.sum(level, cells, tx, ty);
-                if f64::from(bound) >= min_sum && self.may_stand(p, level, tx, ty) {
+                if f64::from(bound) >= min_sum && self.may_stand(level, tx, ty) {
                     queue.push(Node { bound, yaw: n.yaw, level, tx, ty });
                 }
             }
@@ -276,8 +293,8 @@ impl TargetGrid {
     }
 
     /// Whether the block of origins at (tx, ty) of `level` holds one the search may take.
-    fn may_stand(&self, p: &CorrelativeParams, level: usize, tx: i64, ty: i64) -> bool {
-        if !p.standing_only {
+    fn may_stand(&self, level: usize, tx: i64, ty: i64) -> bool {
+        if self.standable.is_empty() {
             return true;
         }
         let (w, h) = (self.width as i64, self.height as i64);
@@ -458,7 +475,6 @@ mod tests {
             max_source_points: 400,
             min_score: 0.2,
             max_expansions: 200_000,
-            standing_only: false,
         }
     }
 
@@ -530,8 +546,8 @@ mod tests {
             }
         }
         let (view, truth) = view_from_2_6(&map);
-        let p = CorrelativeParams { standing_only: true, peaks: 5, min_score: 0.05, ..params() };
-        let grid = TargetGrid::new(&map, Some(&coverage), &p).unwrap();
+        let p = CorrelativeParams { peaks: 5, min_score: 0.05, ..params() };
+        let grid = TargetGrid::new(&map, Some(&coverage), &p).unwrap().standing(1.0).unwrap();
         let peaks = grid.search(&view, &p);
         assert!(!peaks.is_empty());
         for peak in &peaks {

@@ -674,7 +674,6 @@ impl Aligner {
             max_source_points: c.seed_max_points,
             min_score: c.correlative_min_score,
             max_expansions: CORRELATIVE_MAX_EXPANSIONS,
-            standing_only: false,
         }
     }
 
@@ -777,13 +776,9 @@ impl Aligner {
         let params = CorrelativeParams {
             peaks: c.correlative_rivals,
             min_score: c.correlative_rival_min_score,
-            free_penalty: c.correlative_rival_free_penalty,
-            standing_only: true,
             ..self.correlative_params()
         };
-        let Some(grid) = TargetGrid::new(&self.icp_target.index.points, self.coverage.as_deref(), &params) else {
-            return Vec::new();
-        };
+        let Some(grid) = search.grid.standing(c.correlative_rival_free_penalty) else { return Vec::new() };
         grid.search_band(&search.band, &params)
             .into_iter()
             .map(|peak| {
