@@ -193,8 +193,9 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
     // Free-space blocked ratios of every attempt the check ran on, split by whether it was right.
     let (mut blocked_right, mut blocked_wrong) = (Vec::new(), Vec::new());
     let mut rejected_free_space = 0usize;
-    // Where the time goes, per trial: source reduction, seed ranking, full attempts, checks.
-    let mut split_ms: [Vec<f64>; 4] = Default::default();
+    // Where the time goes, per trial: source reduction, seed ranking, full attempts, checks; and
+    // the correlative stage across them.
+    let mut split_ms: [Vec<f64>; 5] = Default::default();
     let mut free_space_ms = Vec::new();
     let mut starts = Vec::new();
     let mut ours = Vec::new();
@@ -226,6 +227,7 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
             split_ms[1].push(r.seed_ms);
             split_ms[2].push(r.attempts.iter().map(|a| a.ndt_ms + a.icp_ms).sum());
             split_ms[3].push(r.attempts.iter().map(|a| a.verify_ms).sum());
+            split_ms[4].push(r.correlative_ms);
             if r.attempts
                 .iter()
                 .any(|a| a.rejected_because.iter().any(|w| matches!(w, Rejection::SeesThroughMap { .. })))
@@ -357,11 +359,12 @@ fn scenario(name: &str, source: &[Vec3], rays: &[Ray], target: &[Vec3], truth: &
     }
     let med = |v: &[f64]| pct(&sorted(v.iter().copied()), 0.5);
     println!(
-        "time per trial, median ms: source reduction {:.1}, seed ranking {:.1}, NDT+ICP attempts {:.1}, checks {:.1}",
+        "time per trial, median ms: source reduction {:.1}, seed ranking {:.1}, NDT+ICP attempts {:.1}, checks {:.1}; correlative stage {:.1} (its search is part of the seed ranking)",
         med(&split_ms[0]),
         med(&split_ms[1]),
         med(&split_ms[2]),
-        med(&split_ms[3])
+        med(&split_ms[3]),
+        med(&split_ms[4])
     );
     let peers = if std::env::var_os("STARC_ALIGN_NO_PEERS").is_some() {
         Vec::new()

@@ -136,6 +136,17 @@ fn main() {
                 o.report.seeds.len(),
                 o.report.total_ms
             );
+            let attempts_ms: f64 = o.report.attempts.iter().map(|a| a.ndt_ms + a.icp_ms).sum();
+            let verify_ms: f64 = o.report.attempts.iter().map(|a| a.verify_ms).sum();
+            println!(
+                "  time ms: reduce {:.0} seeds {:.0} attempts {:.0} checks {:.0} rest {:.0} (correlative stage {:.0})",
+                o.report.source_reduce_ms,
+                o.report.seed_ms,
+                attempts_ms,
+                verify_ms,
+                o.report.total_ms - o.report.source_reduce_ms - o.report.seed_ms - attempts_ms - verify_ms,
+                o.report.correlative_ms
+            );
             for (i, a) in o.report.attempts.iter().enumerate() {
                 let w = a.pose * o.frame_t_lidar;
                 let (em, ed) = pose_error(&w, &truth);

@@ -130,9 +130,10 @@ fn print_text(out: &mut impl Write, report: &AlignReport, prepare_ms: f64) -> st
     }
     writeln!(
         out,
-        "{} seed(s) ranked in {:.1} ms; {} full attempt(s) (best: seed yaw {:+.0} deg); {} source points; target prepared in {:.1} ms; aligned in {:.1} ms",
+        "{} seed(s) ranked in {:.1} ms (correlative stage {:.1} ms); {} full attempt(s) (best: seed yaw {:+.0} deg); {} source points; target prepared in {:.1} ms; aligned in {:.1} ms",
         report.seeds.len(),
         report.seed_ms,
+        report.correlative_ms,
         report.attempts.len(),
         report.best().map_or(0.0, |a| a.seed_yaw_offset_deg),
         report.source_points,

@@ -151,12 +151,18 @@ pub struct AlignConfig {
     /// point landing where the target's coverage saw through costs `correlative_free_penalty`
     /// (one on the target's structure scores 1); a pose scoring under
     /// `correlative_min_score` of the window's points is no seed. An accepted result must
-    /// score `correlative_margin` more than any other place the stage found.
+    /// score `correlative_margin` more than any other place the stage found. Once the best place
+    /// is found, only places within `correlative_within_best` of its score are searched for: a
+    /// place further below can neither rival it nor, accepted, survive beside it; proving that
+    /// no such place exists cost most of the search on a large map; and as an ambiguity
+    /// contender such a place only refused places the stage judges better (1: every place down
+    /// to `correlative_min_score`).
     pub correlative_seeds: usize,
     pub correlative_cell_m: f64,
     pub correlative_free_penalty: f64,
     pub correlative_min_score: f64,
     pub correlative_margin: f64,
+    pub correlative_within_best: f64,
     /// Whether the places the stage found are also tried as seeds (first), or only judge.
     pub correlative_as_seeds: bool,
     /// Places that fit only the part of the map they land on: the best `correlative_rivals`
@@ -258,6 +264,7 @@ impl Default for AlignConfig {
             correlative_free_penalty: 1.0,
             correlative_min_score: 0.2,
             correlative_margin: 0.05,
+            correlative_within_best: 0.05,
             correlative_as_seeds: true,
             correlative_rivals: 12,
             correlative_rival_min_score: 0.05,
@@ -374,11 +381,14 @@ impl AlignConfig {
         if self.correlative_seeds > 0 && !(self.correlative_cell_m >= 0.05 && self.correlative_cell_m.is_finite()) {
             return bad("correlative_cell_m must be at least 0.05 m");
         }
-        let non_negative = [self.correlative_free_penalty, self.correlative_min_score, self.correlative_margin];
+        let non_negative = [
+            self.correlative_free_penalty,
+            self.correlative_min_score,
+            self.correlative_margin,
+            self.correlative_within_best,
+        ];
         if !non_negative.iter().all(|v| v.is_finite() && *v >= 0.0) {
-            return bad(
-                "correlative_free_penalty, correlative_min_score and correlative_margin must be finite and at least 0",
-            );
+            return bad("correlative_free_penalty, _min_score, _margin and _within_best must be finite and at least 0");
         }
         let rival = [self.correlative_rival_min_score, self.correlative_rival_min_known, self.correlative_rival_margin];
         let penalty_ok = self.correlative_rival_free_penalty.is_finite() && self.correlative_rival_free_penalty >= 0.0;

@@ -43,8 +43,12 @@ pub struct CorrelativeParams {
     pub min_crossings: u16,
     /// The source is thinned to at most this many 2D cells.
     pub max_source_points: usize,
-    /// Peaks score at least this share of the source points.
+    /// Peaks score at least this share of the source points ...
     pub min_score: f64,
+    /// ... and, once the best is found, at most this much below it (infinite: any). The search
+    /// ends when nothing left in its queue can score that much; a place further below the best
+    /// can neither rival it nor be accepted beside it.
+    pub within_best: f64,
     /// Nodes taken from the queue, at most (bounds the time on a map with many equal places).
     pub max_expansions: usize,
 }
@@ -245,18 +249,19 @@ impl TargetGrid {
     pub fn search_band(&self, band: &SourceBand, p: &CorrelativeParams) -> Vec<Peak> {
         let (pts, source_floor_m) = (&band.points, band.floor_m);
         let yaws = yaw_steps(pts, self.cell_m);
-        let offsets: Vec<Vec<(i64, i64)>> = yaws.iter().map(|&yaw| self.rotated_cells(pts, yaw)).collect();
-        let min_sum = p.min_score * pts.len() as f64;
+        let footprints: Vec<Footprint> = yaws.iter().map(|&yaw| self.footprint(pts, yaw)).collect();
+        let n_points = pts.len() as f64;
+        let min_sum = p.min_score * n_points;
         let mut queue = BinaryHeap::new();
         let top = LEVELS;
         let block = 1i64 << top;
         let (lo, w, h) = (block, self.width as i64, self.height as i64);
-        for (yi, cells) in offsets.iter().enumerate() {
+        for (yi, fp) in footprints.iter().enumerate() {
             for tx in (lo..w).step_by(block as usize) {
                 for ty in (lo..h).step_by(block as usize) {
-                    let bound = self.sum(top, cells, tx, ty);
+                    let bound = self.sum(top, fp, tx, ty);
                     if f64::from(bound) >= min_sum && self.may_stand(top, tx, ty) {
-                        queue.push(Node { bound, yaw: yi, level: top, tx, ty });
+                        queue.push(Node::new(bound, yi, top, tx, ty));
                     }
                 }
             }
@@ -265,8 +270,14 @@ impl TargetGrid {
         let mut peaks: Vec<Peak> = Vec::new();
         let mut expansions = 0;
         while let Some(n) = queue.pop() {
+            // Every pose in this block is the same place as a peak found since it was queued:
+            // nothing in it could become a peak.
+            if self.within_a_peak(&n, &yaws, &peaks) {
+                continue;
+            }
             expansions += 1;
-            if peaks.len() >= p.peaks || expansions > p.max_expansions {
+            let floor = peaks.first().map_or(min_sum, |best| min_sum.max((best.score - p.within_best) * n_points));
+            if peaks.len() >= p.peaks || expansions > p.max_expansions || f64::from(n.bound) < floor {
                 break;
             }
             if n.level == 0 {
@@ -276,20 +287,39 @@ impl TargetGrid {
                 }
                 continue;
             }
-            let level = n.level - 1;
+            let Some(fp) = footprints.get(usize::from(n.yaw)) else { continue };
+            let level = usize::from(n.level) - 1;
             let half = 1i64 << level;
-            let cells = offsets.get(n.yaw).map_or(&[][..], Vec::as_slice);
-            for (tx, ty) in [(n.tx, n.ty), (n.tx + half, n.ty), (n.tx, n.ty + half), (n.tx + half, n.ty + half)] {
+            let (ntx, nty) = (i64::from(n.tx), i64::from(n.ty));
+            for (tx, ty) in [(ntx, nty), (ntx + half, nty), (ntx, nty + half), (ntx + half, nty + half)] {
                 if tx >= w || ty >= h {
                     continue;
                 }
-                let bound = self.sum(level, cells, tx, ty);
+                let bound = self.sum(level, fp, tx, ty);
                 if f64::from(bound) >= min_sum && self.may_stand(level, tx, ty) {
-                    queue.push(Node { bound, yaw: n.yaw, level, tx, ty });
+                    queue.push(Node::new(bound, usize::from(n.yaw), level, tx, ty));
                 }
             }
         }
         peaks
+    }
+
+    /// Whether every pose of the block `n` is closer than `DISTINCT_M` and `DISTINCT_DEG` to one
+    /// of `peaks` (a hair inside both, so that [`distinct`] agrees on every leaf).
+    fn within_a_peak(&self, n: &Node, yaws: &[f64], peaks: &[Peak]) -> bool {
+        let Some(&yaw) = yaws.get(usize::from(n.yaw)) else { return false };
+        let span = ((1i64 << n.level) - 1) as f64 * self.cell_m;
+        let x0 = self.origin_m[0] + f64::from(n.tx) * self.cell_m;
+        let y0 = self.origin_m[1] + f64::from(n.ty) * self.cell_m;
+        let hair = 1e-6;
+        peaks.iter().any(|q| {
+            let (qx, qy) = (q.pose.translation.x, q.pose.translation.y);
+            let dx = (x0 - qx).abs().max((x0 + span - qx).abs());
+            let dy = (y0 - qy).abs().max((y0 + span - qy).abs());
+            let turn = yaw - q.pose.rotation.euler_angles().2;
+            let turn_deg = turn.sin().atan2(turn.cos()).abs().to_degrees();
+            dx.hypot(dy) < DISTINCT_M - hair && turn_deg < DISTINCT_DEG - hair
+        })
     }
 
     /// Whether the block of origins at (tx, ty) of `level` holds one the search may take.
@@ -305,22 +335,35 @@ impl TargetGrid {
     }
 
     /// The cells the source points fall in, turned by `yaw` (rad), relative to its origin's cell.
-    fn rotated_cells(&self, pts: &[[f64; 2]], yaw: f64) -> Vec<(i64, i64)> {
+    fn footprint(&self, pts: &[[f64; 2]], yaw: f64) -> Footprint {
         let (s, c) = yaw.sin_cos();
-        pts.iter()
+        let cells: Vec<(i64, i64)> = pts
+            .iter()
             .map(|q| {
                 let x = c * q[0] - s * q[1];
                 let y = s * q[0] + c * q[1];
                 ((x / self.cell_m).floor() as i64, (y / self.cell_m).floor() as i64)
             })
-            .collect()
+            .collect();
+        let w = self.width as i64;
+        let flat = cells.iter().map(|&(dx, dy)| dy * w + dx).collect();
+        let lo = cells.iter().fold((0, 0), |a, &(x, y)| (a.0.min(x), a.1.min(y)));
+        let hi = cells.iter().fold((0, 0), |a, &(x, y)| (a.0.max(x), a.1.max(y)));
+        Footprint { cells, flat, lo, hi }
     }
 
-    /// The sum over the source's cells, moved by (tx, ty), of level `level`'s values.
-    fn sum(&self, level: usize, cells: &[(i64, i64)], tx: i64, ty: i64) -> f32 {
+    /// The sum over the footprint's cells, moved by (tx, ty), of level `level`'s values (cells
+    /// off the grid count 0).
+    fn sum(&self, level: usize, fp: &Footprint, tx: i64, ty: i64) -> f32 {
         let Some(grid) = self.levels.get(level) else { return 0.0 };
         let (w, h) = (self.width as i64, self.height as i64);
-        cells
+        let inside = tx + fp.lo.0 >= 0 && ty + fp.lo.1 >= 0 && tx + fp.hi.0 < w && ty + fp.hi.1 < h;
+        if inside {
+            // Every cell is on the grid: one offset per point, no row arithmetic.
+            let at = ty * w + tx;
+            return fp.flat.iter().map(|&o| grid.get((at + o) as usize).copied().unwrap_or(0.0)).sum();
+        }
+        fp.cells
             .iter()
             .map(|&(dx, dy)| {
                 let (x, y) = (dx + tx, dy + ty);
@@ -333,9 +376,9 @@ impl TargetGrid {
     }
 
     fn pose_of(&self, n: &Node, yaws: &[f64], z_m: f64) -> Isometry3<f64> {
-        let yaw = yaws.get(n.yaw).copied().unwrap_or(0.0);
-        let x = self.origin_m[0] + n.tx as f64 * self.cell_m;
-        let y = self.origin_m[1] + n.ty as f64 * self.cell_m;
+        let yaw = yaws.get(usize::from(n.yaw)).copied().unwrap_or(0.0);
+        let x = self.origin_m[0] + f64::from(n.tx) * self.cell_m;
+        let y = self.origin_m[1] + f64::from(n.ty) * self.cell_m;
         Isometry3::from_parts(Translation3::new(x, y, z_m), UnitQuaternion::from_euler_angles(0.0, 0.0, yaw))
     }
 }
@@ -353,13 +396,30 @@ pub struct SourceBand {
     floor_m: f64,
 }
 
+/// A source's cells at one yaw, relative to its origin's cell: as (dx, dy), as offsets into a
+/// level's row-major values, and their bounding box.
+struct Footprint {
+    cells: Vec<(i64, i64)>,
+    flat: Vec<i64>,
+    lo: (i64, i64),
+    hi: (i64, i64),
+}
+
 /// A block of poses in the queue: every translation in [tx, tx + 2^level) x [ty, ..) at one yaw.
+/// Small, because the queue holds hundreds of thousands on a large map.
 struct Node {
     bound: f32,
-    yaw: usize,
-    level: usize,
-    tx: i64,
-    ty: i64,
+    tx: i32,
+    ty: i32,
+    yaw: u16,
+    level: u8,
+}
+
+impl Node {
+    /// Grids hold at most `MAX_CELLS` cells and yaws are at least 0.5 deg apart, so every field fits.
+    fn new(bound: f32, yaw: usize, level: usize, tx: i64, ty: i64) -> Self {
+        Self { bound, tx: tx as i32, ty: ty as i32, yaw: yaw as u16, level: level as u8 }
+    }
 }
 
 impl PartialEq for Node {
@@ -375,9 +435,15 @@ impl PartialOrd for Node {
 }
 impl Ord for Node {
     /// Higher bound first; at equal bounds the finer node, so leaves come out before the blocks
-    /// that tie with them.
+    /// that tie with them; then by yaw and position, so that which of two equal places comes
+    /// first does not depend on what the queue held before.
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.bound.total_cmp(&other.bound).then(other.level.cmp(&self.level))
+        self.bound
+            .total_cmp(&other.bound)
+            .then(other.level.cmp(&self.level))
+            .then(other.yaw.cmp(&self.yaw))
+            .then(other.tx.cmp(&self.tx))
+            .then(other.ty.cmp(&self.ty))
     }
 }
 
@@ -475,6 +541,7 @@ mod tests {
             max_source_points: 400,
             min_score: 0.2,
             max_expansions: 200_000,
+            within_best: f64::INFINITY,
         }
     }
 
@@ -530,6 +597,30 @@ mod tests {
         let (m, deg) = super::super::geometry::pose_error(&best.pose, &truth);
         assert!(m < 0.35 && deg < 3.0, "best peak {m:.2} m {deg:.1} deg off ({:.2})", best.score);
         assert!(best.score > 0.8, "{}", best.score);
+    }
+
+    #[test]
+    fn a_search_kept_within_the_best_finds_the_same_peaks_down_to_that_score() {
+        let map = rooms();
+        let grid = TargetGrid::new(&map, None, &params()).unwrap();
+        let (view, _) = view_from_2_6(&map);
+        let wide = CorrelativeParams { peaks: 8, min_score: 0.05, ..params() };
+        let all = grid.search(&view, &wide);
+        assert!(all.len() >= 3, "{} peaks", all.len());
+        let best = all.first().unwrap().score;
+        // A window that keeps some peaks and drops others.
+        let within = best - all.get(2).unwrap().score + 1e-9;
+        let kept = grid.search(&view, &CorrelativeParams { within_best: within, ..wide });
+        let expected: Vec<&Peak> = all.iter().filter(|q| q.score >= best - within).collect();
+        assert_eq!(kept.len(), expected.len());
+        for (k, e) in kept.iter().zip(&expected) {
+            assert_eq!(k.pose, e.pose);
+            assert_eq!(k.score, e.score);
+        }
+        // Peaks come best first and are distinct places.
+        for (i, a) in all.iter().enumerate() {
+            assert!(all.iter().skip(i + 1).all(|b| b.score <= a.score && distinct(&a.pose, &b.pose)));
+        }
     }
 
     #[test]

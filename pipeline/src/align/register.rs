@@ -201,8 +201,11 @@ pub struct AlignReport {
     pub source_reduce_ms: f64,
     /// Every seed of the search, best score first (empty when the search is off).
     pub seeds: Vec<Seed>,
-    /// Time spent refining and ranking the seeds.
+    /// Time spent refining and ranking the seeds (the correlative stage's search included, when
+    /// its places are seeds).
     pub seed_ms: f64,
+    /// Time spent in the correlative stage: its search, the elsewhere and rival checks.
+    pub correlative_ms: f64,
     pub total_ms: f64,
     pub attempts: Vec<Attempt>,
     /// Why nothing was accepted (None when accepted).
@@ -328,24 +331,20 @@ impl Aligner {
         let source_reduce_ms = t0.ms();
         let first_level = self.first_level(&ndt_source);
         let src = Sources { ndt: &ndt_source, icp: &icp_source, rays };
-        let (attempts, seeds, seed_ms) = if c.reseed_yaw_step_deg > 0.0 {
+        let searched = if c.reseed_yaw_step_deg > 0.0 {
             self.search_seeds(&src, initial, first_level)
         } else {
-            (vec![self.attempt(&src, initial, first_level, 0.0, [0.0; 2])], Vec::new(), 0.0)
+            let attempts = vec![self.attempt(&src, initial, first_level, 0.0, [0.0; 2])];
+            Searched { attempts, seeds: Vec::new(), seed_ms: 0.0, correlative_ms: 0.0 }
         };
-        self.report(initial, attempts, seeds, icp_source.len(), source_reduce_ms, seed_ms, t0)
+        self.report(initial, searched, icp_source.len(), source_reduce_ms, t0)
     }
 
     /// The seed search: every seed ranked on the coarse NDT levels, then full attempts on the
     /// best-ranked until one settles (accepted or ambiguous); when none does from the guess's
     /// position, the same again at positions `escalate_shift_m` around it. Returns the
-    /// attempts, every seed ranked, and the time spent ranking them.
-    fn search_seeds(
-        &self,
-        src: &Sources,
-        initial: &Isometry3<f64>,
-        first_level: usize,
-    ) -> (Vec<Attempt>, Vec<Seed>, f64) {
+    /// attempts, every seed ranked, and the time spent ranking them and in the correlative stage.
+    fn search_seeds(&self, src: &Sources, initial: &Isometry3<f64>, first_level: usize) -> Searched {
         let c = &self.config;
         let mut attempts = Vec::new();
         let t1 = self.config.stopwatch.start();
@@ -353,7 +352,9 @@ impl Aligner {
         let mut starts = self.grid_starts(initial, &self.shifts(c.reseed_shift_m, true));
         starts.extend(self.global_starts(src.icp, initial));
         // Only judging, the correlative stage runs once an attempt has been accepted.
+        let tc = self.config.stopwatch.start();
         let search = if c.correlative_as_seeds { self.correlative_search(src.icp) } else { None };
+        let mut correlative_ms = tc.ms();
         let correlative = self.correlative_seeds(search.as_ref(), initial, &seed_source, first_level);
         let mut seeds = self.rank_seeds(&seed_source, starts, first_level);
         let mut seed_ms = t1.ms();
@@ -385,14 +386,16 @@ impl Aligner {
             seeds.extend(more);
         }
         if let Some(a) = attempts.iter_mut().find(|a| a.accepted) {
+            let tc = self.config.stopwatch.start();
             if let Some(search) = search.or_else(|| self.correlative_search(src.icp)) {
                 self.check_elsewhere(&search, a);
                 if a.accepted {
                     self.check_rivals(&search, a);
                 }
             }
+            correlative_ms += tc.ms();
         }
-        (attempts, seeds, seed_ms)
+        Searched { attempts, seeds, seed_ms, correlative_ms }
     }
 
     /// Translation seeds: the guess's position (when `centre`) and positions `d` away along ±x, ±y.
@@ -541,17 +544,15 @@ impl Aligner {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn report(
         &self,
         initial: &Isometry3<f64>,
-        attempts: Vec<Attempt>,
-        seeds: Vec<Seed>,
+        searched: Searched,
         source_points: usize,
         source_reduce_ms: f64,
-        seed_ms: f64,
         t0: Lap,
     ) -> AlignReport {
+        let Searched { attempts, seeds, seed_ms, correlative_ms } = searched;
         let better = |a: &Attempt, b: &Attempt| {
             (a.accepted, a.metrics.inlier_ratio, -a.metrics.rms_residual_m)
                 > (b.accepted, b.metrics.inlier_ratio, -b.metrics.rms_residual_m)
@@ -583,6 +584,7 @@ impl Aligner {
             source_reduce_ms,
             seeds,
             seed_ms,
+            correlative_ms,
             total_ms: t0.ms(),
             attempts,
             failure,
@@ -674,6 +676,7 @@ impl Aligner {
             max_source_points: c.seed_max_points,
             min_score: c.correlative_min_score,
             max_expansions: CORRELATIVE_MAX_EXPANSIONS,
+            within_best: c.correlative_within_best,
         }
     }
 
@@ -751,7 +754,7 @@ impl Aligner {
         }
         let here = search.grid.known_fit(&search.band, &a.pose);
         a.known_fit = Some(here);
-        a.rivals = self.rivals(search, &a.pose);
+        a.rivals = self.rivals(search, &a.pose, here);
         let rival = a.rivals.iter().find(|r| {
             r.fit.known_share >= c.correlative_rival_min_known
                 && r.fit.score_on_known >= here.score_on_known - c.correlative_rival_margin
@@ -771,11 +774,14 @@ impl Aligner {
     /// Places other than `pose` where the rig could stand (its origin where the robot saw
     /// through), searched with seen-through space costing `correlative_rival_free_penalty`, each
     /// judged on what the map knows there.
-    fn rivals(&self, search: &CorrelativeSearch, pose: &Isometry3<f64>) -> Vec<Rival> {
+    /// Only places that could refuse `pose` (whose fit on what the map knows is `here`) are
+    /// searched for: see [`rival_min_score`].
+    fn rivals(&self, search: &CorrelativeSearch, pose: &Isometry3<f64>, here: KnownFit) -> Vec<Rival> {
         let c = &self.config;
         let params = CorrelativeParams {
             peaks: c.correlative_rivals,
-            min_score: c.correlative_rival_min_score,
+            min_score: c.correlative_rival_min_score.max(rival_min_score(c, here)),
+            within_best: f64::INFINITY,
             ..self.correlative_params()
         };
         let Some(grid) = search.grid.standing(c.correlative_rival_free_penalty) else { return Vec::new() };
@@ -1168,6 +1174,14 @@ impl Aligner {
     }
 }
 
+/// What the seed search did: its attempts, every seed ranked, and where the time went.
+struct Searched {
+    attempts: Vec<Attempt>,
+    seeds: Vec<Seed>,
+    seed_ms: f64,
+    correlative_ms: f64,
+}
+
 /// The source at each reduction, and its rays.
 struct Sources<'a> {
     ndt: &'a [Vec3],
@@ -1186,6 +1200,23 @@ struct Judged {
 
 /// Why a result is refused when ICP from a start off it still lands on a better fit after
 /// every hop allowed.
+/// The least search score (on the standing grid) of a place that could refuse an accepted
+/// place whose fit on what the map knows is `here`. Such a rival has at least
+/// `correlative_rival_min_known` of the window's points on known cells, and their mean value
+/// (structure at most 1, seen-through space `-correlative_free_penalty`) at least
+/// `m = here - correlative_rival_margin`. That caps the seen-through share of its known points
+/// at `(1 - m) / (1 + free_penalty)`, and each of those costs the rival search
+/// `rival_free_penalty - free_penalty` more than it costs the mean.
+pub(super) fn rival_min_score(c: &AlignConfig, here: KnownFit) -> f64 {
+    let m = here.score_on_known - c.correlative_rival_margin;
+    let extra = (c.correlative_rival_free_penalty - c.correlative_free_penalty).max(0.0);
+    let per_known = m - extra * (1.0 - m).max(0.0) / (1.0 + c.correlative_free_penalty);
+    // Least over known shares from `min_known` to 1; a hair below, so that float sums of the
+    // same points never drop a rival on the line.
+    let least = if per_known >= 0.0 { c.correlative_rival_min_known * per_known } else { per_known };
+    least - 1e-6
+}
+
 fn inconsistent(better: &Probe, here: &Probe) -> Rejection {
     Rejection::Inconsistent {
         start_off_m: better.shift_m[0].hypot(better.shift_m[1]),

@@ -168,7 +168,10 @@ fn synthetic_known_transform() {
         Isometry3::from_parts(Translation3::new(0.4, -0.3, 0.1), UnitQuaternion::from_euler_angles(0.02, -0.01, 0.2));
     let inv = truth.inverse();
     let source: Vec<Vec3> = target.iter().map(|p| (inv * Point3::from(*p)).coords).collect();
-    let aligner = Aligner::new(&target, AlignConfig::default()).unwrap();
+    // Every place the correlative stage finds is a seed, so that the ambiguity check has
+    // contenders to refine (by default it keeps only places near the best's score).
+    let config = AlignConfig { correlative_within_best: 1.0, ..AlignConfig::default() };
+    let aligner = Aligner::new(&target, config).unwrap();
     let report = aligner.align(&source, &Isometry3::identity());
     assert_close(&report, &truth, "synthetic");
     let best = report.best().unwrap();

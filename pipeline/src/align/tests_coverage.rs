@@ -187,3 +187,36 @@ fn a_view_of_the_half_the_robot_glimpsed_is_not_placed_in_its_mapped_twin() {
     assert!(!report.accepted, "{:?}", report.best().map(|a| (&a.rivals, a.known_fit)));
     assert!(why.iter().any(|r| matches!(r, Rejection::PartlyMappedRival { .. })), "{why:?}");
 }
+
+/// Every rival that could refuse a place scores at least `rival_min_score` in the rival search,
+/// for any mix of structure (1), beside it (0.5) and seen-through space on its known points:
+/// the search may stop there without changing a verdict.
+#[test]
+fn no_rival_that_could_refuse_scores_under_the_rival_search_floor() {
+    let c = config();
+    let n = 40usize;
+    for here in [0.3, 0.5, 0.7, 0.85, 0.95, 1.0] {
+        let floor = super::register::rival_min_score(&c, KnownFit { known_share: 1.0, score_on_known: here });
+        let mut refusing = 0;
+        for known in 1..=n {
+            for free in 0..=known {
+                for beside in 0..=(known - free) {
+                    let on = (known - free - beside) as f64;
+                    let base = on + 0.5 * beside as f64 - c.correlative_free_penalty * free as f64;
+                    let refuses = known as f64 / n as f64 >= c.correlative_rival_min_known
+                        && base / known as f64 >= here - c.correlative_rival_margin;
+                    if refuses {
+                        refusing += 1;
+                        let standing = on + 0.5 * beside as f64 - c.correlative_rival_free_penalty * free as f64;
+                        assert!(
+                            standing / n as f64 >= floor,
+                            "here {here}: {known} known, {free} seen through, {beside} beside"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(refusing > 0);
+        assert!(floor > 0.0 || here < 0.8, "here {here}: floor {floor}");
+    }
+}
