@@ -193,41 +193,36 @@ impl TargetGrid {
     /// The score of the source at `pose` (its yaw and horizontal position; level), as a share of
     /// its band's points.
     pub fn score(&self, band: &SourceBand, pose: &Isometry3<f64>) -> f64 {
+        let sum: f32 = self.values_under(band, pose).sum();
+        f64::from(sum) / band.points.len().max(1) as f64
+    }
+
+    /// The level-0 value under each of the band's points at `pose` (0 off the grid).
+    fn values_under<'a>(&'a self, band: &'a SourceBand, pose: &Isometry3<f64>) -> impl Iterator<Item = f32> + 'a {
         let yaw = pose.rotation.euler_angles().2;
         let x = (pose.translation.x - self.origin_m[0]) / self.cell_m;
         let y = (pose.translation.y - self.origin_m[1]) / self.cell_m;
         let (s, c) = yaw.sin_cos();
         let (w, h) = (self.width as i64, self.height as i64);
-        let Some(grid) = self.levels.first() else { return 0.0 };
-        let sum: f32 = band
-            .points
-            .iter()
-            .map(|q| {
-                let cx = ((c * q[0] - s * q[1]) / self.cell_m + x).floor() as i64;
-                let cy = ((s * q[0] + c * q[1]) / self.cell_m + y).floor() as i64;
-                if cx < 0 || cy < 0 || cx >= w || cy >= h {
-                    return 0.0;
-                }
-                grid.get((cy * w + cx) as usize).copied().unwrap_or(0.0)
-            })
-            .sum();
-        f64::from(sum) / band.points.len().max(1) as f64
+        let grid = self.levels.first();
+        band.points.iter().map(move |q| {
+            let cx = ((c * q[0] - s * q[1]) / self.cell_m + x).floor() as i64;
+            let cy = ((s * q[0] + c * q[1]) / self.cell_m + y).floor() as i64;
+            if cx < 0 || cy < 0 || cx >= w || cy >= h {
+                return 0.0;
+            }
+            grid.and_then(|g| g.get((cy * w + cx) as usize)).copied().unwrap_or(0.0)
+        })
     }
 
     /// How the band lands at `pose` on what the target knows: the share of its points on known
     /// cells (structure, beside it, or seen through; a point where the target never looked says
     /// nothing) and their mean value there (1 on structure, negative where seen through).
     pub fn known_fit(&self, band: &SourceBand, pose: &Isometry3<f64>) -> KnownFit {
-        let (s, c) = pose.rotation.euler_angles().2.sin_cos();
         let (mut known, mut sum) = (0usize, 0.0f64);
-        for q in &band.points {
-            let x = c * q[0] - s * q[1] + pose.translation.x;
-            let y = s * q[0] + c * q[1] + pose.translation.y;
-            let v = self.value_at(x, y);
-            if v != 0.0 {
-                known += 1;
-                sum += f64::from(v);
-            }
+        for v in self.values_under(band, pose).filter(|&v| v != 0.0) {
+            known += 1;
+            sum += f64::from(v);
         }
         let n = band.points.len().max(1) as f64;
         KnownFit { known_share: known as f64 / n, score_on_known: sum / known.max(1) as f64 }
@@ -267,23 +262,25 @@ impl TargetGrid {
             }
         }
         let z_m = self.floor_m - source_floor_m;
-        let mut peaks: Vec<Peak> = Vec::new();
+        // The peaks found, each with its yaw (rad), which every later pop compares against.
+        let mut found: Vec<(Peak, f64)> = Vec::new();
         let mut expansions = 0;
         while let Some(n) = queue.pop() {
             // Every pose in this block is the same place as a peak found since it was queued:
             // nothing in it could become a peak.
-            if self.within_a_peak(&n, &yaws, &peaks) {
+            if self.within_a_peak(&n, &yaws, &found) {
                 continue;
             }
             expansions += 1;
-            let floor = peaks.first().map_or(min_sum, |best| min_sum.max((best.score - p.within_best) * n_points));
-            if peaks.len() >= p.peaks || expansions > p.max_expansions || f64::from(n.bound) < floor {
+            let floor = found.first().map_or(min_sum, |(best, _)| min_sum.max((best.score - p.within_best) * n_points));
+            if found.len() >= p.peaks || expansions > p.max_expansions || f64::from(n.bound) < floor {
                 break;
             }
             if n.level == 0 {
                 let pose = self.pose_of(&n, &yaws, z_m);
-                if peaks.iter().all(|q| distinct(&q.pose, &pose)) {
-                    peaks.push(Peak { pose, score: f64::from(n.bound) / pts.len() as f64 });
+                if found.iter().all(|(q, _)| distinct(&q.pose, &pose)) {
+                    let yaw = yaws.get(usize::from(n.yaw)).copied().unwrap_or(0.0);
+                    found.push((Peak { pose, score: f64::from(n.bound) / n_points }, yaw));
                 }
                 continue;
             }
@@ -301,22 +298,22 @@ impl TargetGrid {
                 }
             }
         }
-        peaks
+        found.into_iter().map(|(peak, _)| peak).collect()
     }
 
     /// Whether every pose of the block `n` is closer than `DISTINCT_M` and `DISTINCT_DEG` to one
-    /// of `peaks` (a hair inside both, so that [`distinct`] agrees on every leaf).
-    fn within_a_peak(&self, n: &Node, yaws: &[f64], peaks: &[Peak]) -> bool {
+    /// of the peaks `found` (a hair inside both, so that [`distinct`] agrees on every leaf).
+    fn within_a_peak(&self, n: &Node, yaws: &[f64], found: &[(Peak, f64)]) -> bool {
         let Some(&yaw) = yaws.get(usize::from(n.yaw)) else { return false };
         let span = ((1i64 << n.level) - 1) as f64 * self.cell_m;
         let x0 = self.origin_m[0] + f64::from(n.tx) * self.cell_m;
         let y0 = self.origin_m[1] + f64::from(n.ty) * self.cell_m;
         let hair = 1e-6;
-        peaks.iter().any(|q| {
+        found.iter().any(|(q, q_yaw)| {
             let (qx, qy) = (q.pose.translation.x, q.pose.translation.y);
             let dx = (x0 - qx).abs().max((x0 + span - qx).abs());
             let dy = (y0 - qy).abs().max((y0 + span - qy).abs());
-            let turn = yaw - q.pose.rotation.euler_angles().2;
+            let turn = yaw - q_yaw;
             let turn_deg = turn.sin().atan2(turn.cos()).abs().to_degrees();
             dx.hypot(dy) < DISTINCT_M - hair && turn_deg < DISTINCT_DEG - hair
         })

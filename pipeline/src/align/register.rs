@@ -773,9 +773,8 @@ impl Aligner {
 
     /// Places other than `pose` where the rig could stand (its origin where the robot saw
     /// through), searched with seen-through space costing `correlative_rival_free_penalty`, each
-    /// judged on what the map knows there.
-    /// Only places that could refuse `pose` (whose fit on what the map knows is `here`) are
-    /// searched for: see [`rival_min_score`].
+    /// judged on what the map knows there. Only places that could refuse `pose` (whose fit on
+    /// what the map knows is `here`) are searched for: see [`rival_min_score`].
     fn rivals(&self, search: &CorrelativeSearch, pose: &Isometry3<f64>, here: KnownFit) -> Vec<Rival> {
         let c = &self.config;
         let params = CorrelativeParams {
@@ -1198,8 +1197,6 @@ struct Judged {
     overlap: Option<Overlap>,
 }
 
-/// Why a result is refused when ICP from a start off it still lands on a better fit after
-/// every hop allowed.
 /// The least search score (on the standing grid) of a place that could refuse an accepted
 /// place whose fit on what the map knows is `here`. Such a rival has at least
 /// `correlative_rival_min_known` of the window's points on known cells, and their mean value
@@ -1217,6 +1214,8 @@ pub(super) fn rival_min_score(c: &AlignConfig, here: KnownFit) -> f64 {
     least - 1e-6
 }
 
+/// Why a result is refused when ICP from a start off it still lands on a better fit after
+/// every hop allowed.
 fn inconsistent(better: &Probe, here: &Probe) -> Rejection {
     Rejection::Inconsistent {
         start_off_m: better.shift_m[0].hypot(better.shift_m[1]),

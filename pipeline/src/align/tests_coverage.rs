@@ -18,16 +18,23 @@ fn push_wall(pts: &mut Vec<Vec3>, a: (f64, f64), b: (f64, f64), x_max: f64) {
     }
 }
 
-/// Walls of a 20 x 6 m hall split by a wall at x = 5 with a 1.2 m door; 2.5 m high.
-fn walls(x_max: f64) -> Vec<Vec3> {
-    let mut pts = Vec::new();
-    let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, a, b, x_max);
+/// The walls of a 20 x 6 m hall, 2.5 m high, split by a wall at `door_x` with a 1.2 m door in
+/// its middle; those with x at most `x_max`.
+fn push_hall(pts: &mut Vec<Vec3>, door_x: f64, x_max: f64) {
+    let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(pts, a, b, x_max);
     segment((0.0, 0.0), (20.0, 0.0));
     segment((20.0, 0.0), (20.0, 6.0));
     segment((20.0, 6.0), (0.0, 6.0));
     segment((0.0, 6.0), (0.0, 0.0));
-    segment((5.0, 0.0), (5.0, 2.4));
-    segment((5.0, 3.6), (5.0, 6.0));
+    segment((door_x, 0.0), (door_x, 2.4));
+    segment((door_x, 3.6), (door_x, 6.0));
+}
+
+/// Walls of a 20 x 6 m hall split by a wall at x = 5 with a 1.2 m door; 2.5 m high.
+fn walls(x_max: f64) -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    push_hall(&mut pts, 5.0, x_max);
+    let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, a, b, x_max);
     // A cupboard in the left room, so the fit is not a bare box.
     segment((1.0, 4.0), (2.0, 4.0));
     segment((2.0, 4.0), (2.0, 5.0));
@@ -138,13 +145,8 @@ fn a_view_that_fits_two_places_on_the_map_is_refused() {
 /// about its centre (a cupboard in each, where the turn puts it), 2.5 m high, with a floor.
 fn twin_halves() -> Vec<Vec3> {
     let mut pts = Vec::new();
+    push_hall(&mut pts, 10.0, f64::MAX);
     let mut segment = |a: (f64, f64), b: (f64, f64)| push_wall(&mut pts, a, b, f64::MAX);
-    segment((0.0, 0.0), (20.0, 0.0));
-    segment((20.0, 0.0), (20.0, 6.0));
-    segment((20.0, 6.0), (0.0, 6.0));
-    segment((0.0, 6.0), (0.0, 0.0));
-    segment((10.0, 0.0), (10.0, 2.4));
-    segment((10.0, 3.6), (10.0, 6.0));
     for (x0, y0, s) in [(2.0, 4.0, 1.0), (18.0, 2.0, -1.0)] {
         segment((x0, y0), (x0 + s, y0));
         segment((x0 + s, y0), (x0 + s, y0 + s));

@@ -37,8 +37,7 @@ impl Waiting {
             return Self::Overlap { share };
         }
         if let Some(off_m) = because.iter().find_map(|r| match r {
-            Rejection::ElsewhereAsGood { off_m, .. } => Some(*off_m),
-            Rejection::PartlyMappedRival { off_m, .. } => Some(*off_m),
+            Rejection::ElsewhereAsGood { off_m, .. } | Rejection::PartlyMappedRival { off_m, .. } => Some(*off_m),
             _ => None,
         }) {
             return Self::Lookalike { off_m };
