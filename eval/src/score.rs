@@ -206,9 +206,11 @@ impl Scorer {
         if tracing::enabled!(tracing::Level::DEBUG) {
             let w_t_l = l_t_w.inverse();
             for (det, label) in d.found.iter().zip(&m.detection_label) {
+                let at = w_t_l.transform_point(&det.centre_m.into());
                 if label.is_none() {
-                    let at = w_t_l.transform_point(&det.centre_m.into());
                     tracing::debug!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "false positive (scenario frame)");
+                } else {
+                    tracing::trace!(stamp_ns = d.stamp_ns, x_m = at.x, y_m = at.y, z_m = at.z, size_m = ?det.size_m, pose = ?det.pose, score = det.score, "true positive (scenario frame)");
                 }
             }
             // Each miss, and each person the box would have counted but their labels do not,

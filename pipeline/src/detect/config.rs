@@ -144,11 +144,33 @@ pub struct TreesConfig {
     /// Of two people found closer than this, only the likelier is kept (two pieces of one body
     /// are not two people).
     pub min_separation_m: f64,
+    /// A cluster the trees give at least this (but under `min_score`) is still a person where
+    /// someone followed (`follow_s`, `follow_min_confirmations`, `follow_radius_m`) may be by
+    /// now: a person once found is kept through the windows where the trees doubt them. At
+    /// `min_score` or above nobody is followed.
+    pub follow_min_score: f64,
+    /// Only confirmations the trees give at least this count towards following someone: most
+    /// people are confirmed at 0.9 or more, most furniture taken for someone below it.
+    pub track_min_score: f64,
+    /// Where someone followed is in no detection of a window, the points inside the box they
+    /// were last confirmed in (moved on at their velocity, grown by `carve_margin_m`) are
+    /// clustered on their own and shown to the trees (a person merged with the bed they lie on
+    /// or the chair they sit in). Only while following (`follow_min_score` under `min_score`).
+    pub carve: bool,
+    pub carve_margin_m: f64,
 }
 
 impl Default for TreesConfig {
     fn default() -> Self {
-        Self { model: None, min_score: 0.7, min_separation_m: 0.5 }
+        Self {
+            model: None,
+            min_score: 0.7,
+            min_separation_m: 0.5,
+            follow_min_score: 0.3,
+            track_min_score: 0.9,
+            carve: true,
+            carve_margin_m: 0.0,
+        }
     }
 }
 
@@ -299,6 +321,17 @@ impl DetectConfig {
         let t = &self.trees;
         if !((0.0..=1.0).contains(&t.min_score) && t.min_separation_m.is_finite() && t.min_separation_m >= 0.0) {
             return Err(bad("trees.min_score must be in [0, 1] and trees.min_separation_m finite and not negative"));
+        }
+        if !(t.follow_min_score > 0.0 && t.follow_min_score <= 1.0) {
+            return Err(bad(
+                "trees.follow_min_score must be in (0, 1] (at trees.min_score or above nobody is followed)",
+            ));
+        }
+        if !(0.0..=1.0).contains(&t.track_min_score) {
+            return Err(bad("trees.track_min_score must be in [0, 1]"));
+        }
+        if !(t.carve_margin_m.is_finite() && (0.0..=1.0).contains(&t.carve_margin_m)) {
+            return Err(bad("trees.carve_margin_m must be between 0 and 1"));
         }
         let p = &self.pillars;
         if !((0.0..=1.0).contains(&p.min_score) && (0.0..=1.0).contains(&p.nms_iou)) {

@@ -62,8 +62,14 @@ impl Track {
     /// Whether a cluster at `xy` in a window stamped `now_ns` may be this person: within
     /// `radius_m` of where their velocity has carried them since their last confirmation.
     pub fn reaches(&self, xy: Vector2<f64>, now_ns: u64, radius_m: f64) -> bool {
+        (self.now_at(now_ns) - xy).norm() <= radius_m
+    }
+
+    /// Where the track's velocity has carried the person by `now_ns` since their last
+    /// confirmation.
+    pub fn now_at(&self, now_ns: u64) -> Vector2<f64> {
         let age_s = now_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
-        (self.at + self.velocity_mps() * age_s - xy).norm() <= radius_m
+        self.at + self.velocity_mps() * age_s
     }
 }
 

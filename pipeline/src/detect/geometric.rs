@@ -1,6 +1,7 @@
 //! The classical detector: floor and ceiling out, voxel clusters, planes peeled off oversized
 //! clusters, each cluster scored as a person.
 
+use super::carve::{carve, Shape};
 use super::classify::{score, score_behind, score_followed, tallest_scorable_m, too_big};
 use super::cluster::{drop_tall_columns, peel_plane, Grid};
 use super::features::features;
@@ -28,6 +29,9 @@ pub struct GeometricDetector {
     trees: Option<TreeModel>,
     /// Where every gate last confirmed someone (x, y in the world) and when (window stamp, ns).
     confirmed: Vec<(Vector2<f64>, u64)>,
+    /// The box of each of the trees' confirmations in `confirmed` (to find them again inside a
+    /// cluster they merged with, [`super::carve`]).
+    shapes: Vec<Shape>,
     kept: Vec<(u32, Vector3<f64>)>,
     /// The last window's floor and clusters, for diagnosis and tuning.
     last_floor: Option<FloorModel>,
@@ -54,6 +58,7 @@ impl GeometricDetector {
             cfg,
             trees,
             confirmed: Vec::new(),
+            shapes: Vec::new(),
             kept: Vec::new(),
             last_floor: None,
             last_clusters: Vec::new(),
@@ -132,7 +137,14 @@ impl Detector for GeometricDetector {
         let scene = Scene::new(window, &self.cfg, &followed, trees.as_ref());
         self.last_floor = Some(scene.floor);
         keep_above_floor(&mut self.kept, &scene, &self.cfg);
+        let first = out.len();
         let confirmed_now = self.judge_clusters(&scene, out);
+        if scene.carving(&self.cfg) {
+            self.find_followed_again(&scene, first, out);
+        }
+        if scene.trees.is_some() {
+            keep_separate(out, first, self.cfg.trees.min_separation_m);
+        }
         self.trees = trees;
         self.confirmed = followed;
         self.confirmed.extend(confirmed_now);
@@ -147,21 +159,23 @@ impl GeometricDetector {
     fn take_followed(&mut self, now_ns: u64) -> Vec<(Vector2<f64>, u64)> {
         let follow_ns = follow_ns(&self.cfg);
         self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
+        self.shapes.retain(|s| s.t_ns <= now_ns && now_ns - s.t_ns <= 2 * follow_ns);
         std::mem::take(&mut self.confirmed)
     }
 
     /// Scores every cluster of the kept points (splitting the ones bigger than anyone) and
-    /// pushes the people found to `out`; returns where each was confirmed whole. Partial views
+    /// pushes the people found to `out`; returns where each confirmation that counts towards
+    /// following them was made (every one of the gates', the trees' from `track_min_score`). Partial views
     /// of followed people go last, once every full confirmation of the window is known: a piece
     /// of someone confirmed whole here is not a second person.
     fn judge_clusters(&mut self, scene: &Scene<'_, '_>, out: &mut Vec<Detection>) -> Vec<(Vector2<f64>, u64)> {
         let cfg = &self.cfg;
-        let first = out.len();
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
         let mut partial: Vec<PartialView> = Vec::new();
         let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
+        let mut tracked_now: Vec<(Vector2<f64>, u64)> = Vec::new();
         let mut stack: Vec<(Vec<u32>, usize)> = grid.all_components().into_iter().map(|c| (c, 0)).collect();
         while let Some((cluster, depth)) = stack.pop() {
             if !enough_to_score(&grid, &cluster, cfg) {
@@ -195,11 +209,17 @@ impl GeometricDetector {
             }
             if s >= scene.min_score(cfg) {
                 confirmed_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
+                if scene.tracks_on(s, cfg) {
+                    tracked_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
+                    if scene.carving(cfg) {
+                        self.shapes.push(Shape::of(&f, scene.now_ns));
+                    }
+                }
                 out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
                 self.last_clusters.push((f, s));
                 continue;
             }
-            if let Some((followed_pose, followed_score)) = scene.as_followed(&f, cfg) {
+            if let Some((followed_pose, followed_score)) = scene.as_followed(&f, pose, s, cfg) {
                 let idx = grid.points_of_cluster(&cluster).collect();
                 partial.push((f.clone(), followed_pose, followed_score, idx));
                 self.last_clusters.push((f, followed_score));
@@ -212,10 +232,38 @@ impl GeometricDetector {
             }
         }
         push_partial_views(partial, &confirmed_now, scene, cfg, out);
-        if scene.trees.is_some() {
-            keep_separate(out, first, cfg.trees.min_separation_m);
+        tracked_now
+    }
+
+    /// Each person followed whom no detection of `out[first..]` holds is looked for in the
+    /// points of the box they were last confirmed in, moved on at their velocity
+    /// ([`super::carve`]); what the trees take for them there is pushed (it is no
+    /// confirmation: it does not keep them followed).
+    fn find_followed_again(&self, scene: &Scene<'_, '_>, first: usize, out: &mut Vec<Detection>) {
+        let cfg = &self.cfg;
+        let mut envelope: Option<FovEnvelope> = None;
+        for track in scene.tracks.iter().filter(|tr| scene.is_followed(tr, cfg)) {
+            let now_at = track.now_at(scene.now_ns);
+            let Some(shape) = self.shapes.iter().find(|s| s.t_ns == track.t_ns && s.at == track.at) else {
+                continue;
+            };
+            // A detection near where they are, or over their box, is them (or a piece of them).
+            let held = |d: &Detection| {
+                let xy = d.centre_m.xy();
+                (xy - now_at).norm() <= cfg.follow_radius_m || shape.covers(now_at, xy, cfg.trees.min_separation_m)
+            };
+            if out.get(first..).is_some_and(|found| found.iter().any(held)) {
+                continue;
+            }
+            let carved = carve(&self.kept, shape, now_at, cfg.trees.carve_margin_m);
+            let grid = Grid::new(&carved, cfg.voxel_m);
+            let largest = grid.all_components().into_iter().max_by_key(|c| grid.points_of_cluster(c).count());
+            let Some(cluster) = largest.filter(|c| enough_to_score(&grid, c, cfg)) else { continue };
+            let Some((f, pose, s)) = scene.rate(&grid, &cluster, cfg, false, &mut envelope) else { continue };
+            if s >= cfg.trees.follow_min_score {
+                out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
+            }
         }
-        confirmed_now
     }
 }
 
@@ -255,7 +303,8 @@ impl<'s, 'w> Scene<'s, 'w> {
         let sensor = window.sensor_pose.translation.vector;
         let floor = estimate_floor(window.points, sensor.z, cfg);
         let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
-        let follow_ns = if trees.is_some() { 0 } else { follow_ns(cfg) };
+        let trees_follow = cfg.trees.follow_min_score < cfg.trees.min_score;
+        let follow_ns = if trees.is_some() && !trees_follow { 0 } else { follow_ns(cfg) };
         Self { window, now_ns: window.stamp.ns, follow_ns, tracks, sensor, floor, top, trees }
     }
 
@@ -270,11 +319,23 @@ impl<'s, 'w> Scene<'s, 'w> {
 
     /// Whether someone every gate confirmed often and lately may have walked to `xy` by now.
     fn near_followed(&self, xy: Vector2<f64>, cfg: &DetectConfig) -> bool {
-        self.tracks.iter().any(|tr| {
-            tr.confirmations >= cfg.follow_min_confirmations
-                && self.now_ns - tr.t_ns <= self.follow_ns
-                && tr.reaches(xy, self.now_ns, cfg.follow_radius_m)
-        })
+        self.tracks.iter().any(|tr| self.is_followed(tr, cfg) && tr.reaches(xy, self.now_ns, cfg.follow_radius_m))
+    }
+
+    /// Whether a track was confirmed often enough, and lately enough, to be followed now.
+    fn is_followed(&self, tr: &Track, cfg: &DetectConfig) -> bool {
+        tr.confirmations >= cfg.follow_min_confirmations && self.now_ns - tr.t_ns <= self.follow_ns
+    }
+
+    /// Whether a confirmation scored `s` counts towards a track: every one of the gates', the
+    /// trees' from `trees.track_min_score`.
+    fn tracks_on(&self, s: f64, cfg: &DetectConfig) -> bool {
+        self.trees.is_none() || s >= cfg.trees.track_min_score
+    }
+
+    /// Whether the trees look for the people they follow inside the clusters they merged with.
+    fn carving(&self, cfg: &DetectConfig) -> bool {
+        self.trees.is_some() && self.follow_ns > 0 && cfg.trees.carve
     }
 
     /// The learned scorer's input vector of a cluster (its points with their height above the
@@ -375,12 +436,22 @@ impl<'s, 'w> Scene<'s, 'w> {
         seen.top_columns > 0 && seen.top_free >= share && seen.bottom_hidden >= share
     }
 
-    /// A cluster too weak alone but near someone followed (and no structure), scored as a
-    /// partial view of them; None when that fails too.
-    fn as_followed(&self, f: &ClusterFeatures, cfg: &DetectConfig) -> Option<(PersonPose, f64)> {
+    /// A cluster too weak alone (its posture and score `pose`, `s` on its own) but near someone
+    /// followed (and no structure), scored as a partial view of them; None when that fails
+    /// too. The trees keep their own judgement with the lower `follow_min_score`.
+    fn as_followed(
+        &self,
+        f: &ClusterFeatures,
+        pose: PersonPose,
+        s: f64,
+        cfg: &DetectConfig,
+    ) -> Option<(PersonPose, f64)> {
         let xy = Vector2::new(f.centre.x, f.centre.y);
         if self.is_structure(f) || self.follow_ns == 0 || !self.near_followed(xy, cfg) {
             return None;
+        }
+        if self.trees.is_some() {
+            return (s >= cfg.trees.follow_min_score).then_some((pose, s));
         }
         let (pose, s) = score_followed(f, cfg);
         (s >= cfg.min_score).then_some((pose, s))

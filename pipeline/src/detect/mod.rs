@@ -22,6 +22,7 @@
 //! # Ok(()) }
 //! ```
 
+mod carve;
 mod classify;
 mod cluster;
 mod config;
@@ -144,3 +145,5 @@ pub fn make_detector(cfg: &DetectConfig) -> Result<Box<dyn Detector + Send>, cra
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_trees;

@@ -24,7 +24,7 @@ fn jitter(i: usize, a: f64) -> f64 {
     (h as f64 / (1u64 << 24) as f64 * 2.0 - 1.0) * a
 }
 
-fn grid(out: &mut Vec<WindowPoint>, a: [f64; 2], b: [f64; 2], step: f64, f: impl Fn(f64, f64) -> [f64; 3]) {
+pub(super) fn grid(out: &mut Vec<WindowPoint>, a: [f64; 2], b: [f64; 2], step: f64, f: impl Fn(f64, f64) -> [f64; 3]) {
     let (mut u, mut i) = (a[0], out.len());
     while u <= a[1] {
         let mut v = b[0];
@@ -39,7 +39,7 @@ fn grid(out: &mut Vec<WindowPoint>, a: [f64; 2], b: [f64; 2], step: f64, f: impl
 }
 
 /// The half of a vertical cylinder facing the sensor at the origin.
-fn cylinder(out: &mut Vec<WindowPoint>, c: [f64; 2], r: f64, z: [f64; 2]) {
+pub(super) fn cylinder(out: &mut Vec<WindowPoint>, c: [f64; 2], r: f64, z: [f64; 2]) {
     let facing = (-c[1]).atan2(-c[0]);
     grid(out, [-1.5, 1.5], z, 0.03, |a, h| {
         let t = facing + a;
@@ -165,6 +165,8 @@ fn the_shipped_config_loads_and_bad_ones_are_refused() {
     assert_eq!(DetectConfig::from_toml("").unwrap(), DetectConfig::default());
     assert!(DetectConfig::from_toml("[trees]\nmin_score = 1.5").is_err());
     assert!(DetectConfig::from_toml("[trees]\nmin_separation_m = -1.0").is_err());
+    assert!(DetectConfig::from_toml("[trees]\nfollow_min_score = 0.0").is_err());
+    assert!(DetectConfig::from_toml("[trees]\ncarve_margin_m = -0.1").is_err());
     assert!(
         DetectConfig::from_toml("[trees]\nmodel = \"/nonexistent.stpw\"").is_ok(),
         "read when the detector is made"
@@ -269,7 +271,7 @@ fn crouching_scene(walled: bool, t_ns: u64) -> Vec<WindowPoint> {
 }
 
 /// The floor, part of a ceiling and (`walled`) a wall 8 m ahead.
-fn room(walled: bool) -> Vec<WindowPoint> {
+pub(super) fn room(walled: bool) -> Vec<WindowPoint> {
     let mut p = Vec::new();
     grid(&mut p, [0.5, 8.0], [-3.0, 3.0], 0.08, |x, y| [x, y, 0.0]);
     grid(&mut p, [2.0, 8.0], [1.5, 3.0], 0.1, |x, y| [x, y, 2.8]);
@@ -306,7 +308,7 @@ fn confirmed_crouching(det: &mut GeometricDetector) -> u64 {
     S + S / 2
 }
 
-fn detect_at(det: &mut GeometricDetector, points: Vec<WindowPoint>, t_ns: u64) -> Vec<Detection> {
+pub(super) fn detect_at(det: &mut GeometricDetector, points: Vec<WindowPoint>, t_ns: u64) -> Vec<Detection> {
     let points: Vec<WindowPoint> = points.into_iter().map(|q| WindowPoint { t_ns, ..q }).collect();
     let w = DetectWindow { stamp: Stamp::new(t_ns, Clock::Ptp), ..window(&points) };
     let mut found = Vec::new();
