@@ -1,4 +1,4 @@
-//! Finding a followed person again inside a cluster they merged with (the trees' following).
+//! The box each confirmation was made in, and finding a followed person again inside a cluster they merged with (the trees' following).
 //!
 //! One window's clusters are not the next one's: someone lying on a bed or sitting in a chair is
 //! their own cluster in one window and part of the bed's or the chair's in the next, and no
@@ -50,9 +50,7 @@ impl Shape {
             && p.z >= self.bottom_m - margin_m
             && p.z <= self.top_m + margin_m
     }
-}
 
-impl Shape {
     /// Whether `xy` lies over this box's footprint moved to `centre` and grown by `margin_m`
     /// (a detection there is a piece of this person).
     pub fn covers(&self, centre: Vector2<f64>, xy: Vector2<f64>, margin_m: f64) -> bool {

@@ -14,6 +14,8 @@ pub struct Track {
     /// Where and when (window stamp) they were last confirmed.
     pub at: Vector2<f64>,
     pub t_ns: u64,
+    /// That newest confirmation's index in the slice the track was chained from.
+    pub newest: usize,
     /// The oldest confirmation chained so far (where the next older one must lie near).
     tail: Vector2<f64>,
     tail_ns: u64,
@@ -24,10 +26,10 @@ pub struct Track {
 /// oldest confirmation so far lies within `radius_m` plus a walk at `walk_mps` over the time
 /// between them (the nearest such track), else it starts one.
 pub fn tracks(confirmed: &[(Vector2<f64>, u64)], radius_m: f64, walk_mps: f64) -> Vec<Track> {
-    let mut newest_first: Vec<&(Vector2<f64>, u64)> = confirmed.iter().collect();
-    newest_first.sort_by_key(|c| std::cmp::Reverse(c.1));
+    let mut newest_first: Vec<(usize, &(Vector2<f64>, u64))> = confirmed.iter().enumerate().collect();
+    newest_first.sort_by_key(|(_, c)| std::cmp::Reverse(c.1));
     let mut out: Vec<Track> = Vec::new();
-    for &&(at, t_ns) in &newest_first {
+    for &(index, &(at, t_ns)) in &newest_first {
         let reach = |tr: &Track| radius_m + walk_mps * tr.tail_ns.saturating_sub(t_ns) as f64 * 1e-9;
         let nearest = out
             .iter_mut()
@@ -40,7 +42,7 @@ pub fn tracks(confirmed: &[(Vector2<f64>, u64)], radius_m: f64, walk_mps: f64) -
                 tr.tail_ns = t_ns;
                 tr.confirmations += 1;
             }
-            None => out.push(Track { at, t_ns, tail: at, tail_ns: t_ns, confirmations: 1 }),
+            None => out.push(Track { at, t_ns, newest: index, tail: at, tail_ns: t_ns, confirmations: 1 }),
         }
     }
     out

@@ -27,11 +27,10 @@ pub struct GeometricDetector {
     cfg: DetectConfig,
     /// The learned scorer (`kind = "trees"`) in place of the posture gates.
     trees: Option<TreeModel>,
-    /// Where every gate last confirmed someone (x, y in the world) and when (window stamp, ns).
-    confirmed: Vec<(Vector2<f64>, u64)>,
-    /// The box of each of the trees' confirmations in `confirmed` (to find them again inside a
+    /// The confirmations that count towards following someone: where (x, y in the world),
+    /// when (window stamp, ns) and the box they were made in (to find the person again inside a
     /// cluster they merged with, [`super::carve`]).
-    shapes: Vec<Shape>,
+    confirmed: Vec<Shape>,
     kept: Vec<(u32, Vector3<f64>)>,
     /// The last window's floor and clusters, for diagnosis and tuning.
     last_floor: Option<FloorModel>,
@@ -58,7 +57,6 @@ impl GeometricDetector {
             cfg,
             trees,
             confirmed: Vec::new(),
-            shapes: Vec::new(),
             kept: Vec::new(),
             last_floor: None,
             last_clusters: Vec::new(),
@@ -140,7 +138,7 @@ impl Detector for GeometricDetector {
         let first = out.len();
         let confirmed_now = self.judge_clusters(&scene, out);
         if scene.carving(&self.cfg) {
-            self.find_followed_again(&scene, first, out);
+            find_followed_again(&scene, &self.kept, &self.cfg, first, out);
         }
         if scene.trees.is_some() {
             keep_separate(out, first, self.cfg.trees.min_separation_m);
@@ -156,26 +154,25 @@ impl GeometricDetector {
     /// puts them back with this window's own). A window older than one already seen (a replay
     /// restarted) follows nobody. Confirmations are kept twice as long as a person is followed:
     /// all of them count towards the track, the last one starts the time it is followed for.
-    fn take_followed(&mut self, now_ns: u64) -> Vec<(Vector2<f64>, u64)> {
+    fn take_followed(&mut self, now_ns: u64) -> Vec<Shape> {
         let follow_ns = follow_ns(&self.cfg);
-        self.confirmed.retain(|&(_, t)| t <= now_ns && now_ns - t <= 2 * follow_ns);
-        self.shapes.retain(|s| s.t_ns <= now_ns && now_ns - s.t_ns <= 2 * follow_ns);
+        self.confirmed.retain(|c| c.t_ns <= now_ns && now_ns - c.t_ns <= 2 * follow_ns);
         std::mem::take(&mut self.confirmed)
     }
 
     /// Scores every cluster of the kept points (splitting the ones bigger than anyone) and
     /// pushes the people found to `out`; returns where each confirmation that counts towards
-    /// following them was made (every one of the gates', the trees' from `track_min_score`). Partial views
-    /// of followed people go last, once every full confirmation of the window is known: a piece
-    /// of someone confirmed whole here is not a second person.
-    fn judge_clusters(&mut self, scene: &Scene<'_, '_>, out: &mut Vec<Detection>) -> Vec<(Vector2<f64>, u64)> {
+    /// following them was made (every one of the gates', the trees' from `track_min_score`).
+    /// Partial views of followed people go last, once every full confirmation of the window is
+    /// known: a piece of someone confirmed whole here is not a second person.
+    fn judge_clusters(&mut self, scene: &Scene<'_, '_>, out: &mut Vec<Detection>) -> Vec<Shape> {
         let cfg = &self.cfg;
         let grid = Grid::new(&self.kept, cfg.voxel_m);
         // Built for the first candidate that needs it (most windows have none).
         let mut envelope: Option<FovEnvelope> = None;
         let mut partial: Vec<PartialView> = Vec::new();
         let mut confirmed_now: Vec<(Vector2<f64>, u64)> = Vec::new();
-        let mut tracked_now: Vec<(Vector2<f64>, u64)> = Vec::new();
+        let mut tracked_now: Vec<Shape> = Vec::new();
         let mut stack: Vec<(Vec<u32>, usize)> = grid.all_components().into_iter().map(|c| (c, 0)).collect();
         while let Some((cluster, depth)) = stack.pop() {
             if !enough_to_score(&grid, &cluster, cfg) {
@@ -210,10 +207,7 @@ impl GeometricDetector {
             if s >= scene.min_score(cfg) {
                 confirmed_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
                 if scene.tracks_on(s, cfg) {
-                    tracked_now.push((Vector2::new(f.centre.x, f.centre.y), scene.now_ns));
-                    if scene.carving(cfg) {
-                        self.shapes.push(Shape::of(&f, scene.now_ns));
-                    }
+                    tracked_now.push(Shape::of(&f, scene.now_ns));
                 }
                 out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
                 self.last_clusters.push((f, s));
@@ -234,35 +228,38 @@ impl GeometricDetector {
         push_partial_views(partial, &confirmed_now, scene, cfg, out);
         tracked_now
     }
+}
 
-    /// Each person followed whom no detection of `out[first..]` holds is looked for in the
-    /// points of the box they were last confirmed in, moved on at their velocity
-    /// ([`super::carve`]); what the trees take for them there is pushed (it is no
-    /// confirmation: it does not keep them followed).
-    fn find_followed_again(&self, scene: &Scene<'_, '_>, first: usize, out: &mut Vec<Detection>) {
-        let cfg = &self.cfg;
-        let mut envelope: Option<FovEnvelope> = None;
-        for track in scene.tracks.iter().filter(|tr| scene.is_followed(tr, cfg)) {
-            let now_at = track.now_at(scene.now_ns);
-            let Some(shape) = self.shapes.iter().find(|s| s.t_ns == track.t_ns && s.at == track.at) else {
-                continue;
-            };
-            // A detection near where they are, or over their box, is them (or a piece of them).
-            let held = |d: &Detection| {
-                let xy = d.centre_m.xy();
-                (xy - now_at).norm() <= cfg.follow_radius_m || shape.covers(now_at, xy, cfg.trees.min_separation_m)
-            };
-            if out.get(first..).is_some_and(|found| found.iter().any(held)) {
-                continue;
-            }
-            let carved = carve(&self.kept, shape, now_at, cfg.trees.carve_margin_m);
-            let grid = Grid::new(&carved, cfg.voxel_m);
-            let largest = grid.all_components().into_iter().max_by_key(|c| grid.points_of_cluster(c).count());
-            let Some(cluster) = largest.filter(|c| enough_to_score(&grid, c, cfg)) else { continue };
-            let Some((f, pose, s)) = scene.rate(&grid, &cluster, cfg, false, &mut envelope) else { continue };
-            if s >= cfg.trees.follow_min_score {
-                out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
-            }
+/// Each person followed whom no detection of `out[first..]` holds is looked for in the
+/// points of the box they were last confirmed in, moved on at their velocity
+/// ([`super::carve`]); what the trees take for them there is pushed (it is no
+/// confirmation: it does not keep them followed).
+fn find_followed_again(
+    scene: &Scene<'_, '_>,
+    kept: &[(u32, Vector3<f64>)],
+    cfg: &DetectConfig,
+    first: usize,
+    out: &mut Vec<Detection>,
+) {
+    let mut envelope: Option<FovEnvelope> = None;
+    for track in scene.tracks.iter().filter(|tr| scene.is_followed(tr, cfg)) {
+        let now_at = track.now_at(scene.now_ns);
+        let Some(shape) = scene.followed.get(track.newest) else { continue };
+        // A detection near where they are, or over their box, is them (or a piece of them).
+        let held = |d: &Detection| {
+            let xy = d.centre_m.xy();
+            (xy - now_at).norm() <= cfg.follow_radius_m || shape.covers(now_at, xy, cfg.trees.min_separation_m)
+        };
+        if out.get(first..).is_some_and(|found| found.iter().any(held)) {
+            continue;
+        }
+        let carved = carve(kept, shape, now_at, cfg.trees.carve_margin_m);
+        let grid = Grid::new(&carved, cfg.voxel_m);
+        let largest = grid.all_components().into_iter().max_by_key(|c| grid.points_of_cluster(c).count());
+        let Some(cluster) = largest.filter(|c| enough_to_score(&grid, c, cfg)) else { continue };
+        let Some((f, pose, s)) = scene.rate(&grid, &cluster, cfg, false, &mut envelope) else { continue };
+        if s >= cfg.trees.follow_min_score {
+            out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
         }
     }
 }
@@ -282,6 +279,8 @@ struct Scene<'s, 'w> {
     window: &'s DetectWindow<'w>,
     now_ns: u64,
     follow_ns: u64,
+    /// The confirmations followed into this window, and the tracks chained from them.
+    followed: &'s [Shape],
     tracks: Vec<Track>,
     /// The sensor's position in the world.
     sensor: Vector3<f64>,
@@ -296,16 +295,17 @@ impl<'s, 'w> Scene<'s, 'w> {
     fn new(
         window: &'s DetectWindow<'w>,
         cfg: &DetectConfig,
-        followed: &[(Vector2<f64>, u64)],
+        followed: &'s [Shape],
         trees: Option<&'s TreeModel>,
     ) -> Self {
-        let tracks = tracks(followed, cfg.follow_radius_m, cfg.follow_walk_mps);
+        let at: Vec<(Vector2<f64>, u64)> = followed.iter().map(|c| (c.at, c.t_ns)).collect();
+        let tracks = tracks(&at, cfg.follow_radius_m, cfg.follow_walk_mps);
         let sensor = window.sensor_pose.translation.vector;
         let floor = estimate_floor(window.points, sensor.z, cfg);
         let top = floor.ceiling_above_floor_m.map_or(f64::MAX, |c| c - cfg.ceiling_band_m);
         let trees_follow = cfg.trees.follow_min_score < cfg.trees.min_score;
         let follow_ns = if trees.is_some() && !trees_follow { 0 } else { follow_ns(cfg) };
-        Self { window, now_ns: window.stamp.ns, follow_ns, tracks, sensor, floor, top, trees }
+        Self { window, now_ns: window.stamp.ns, follow_ns, followed, tracks, sensor, floor, top, trees }
     }
 
     /// The score a person needs: the trees' probability or the gates' score.
