@@ -41,6 +41,9 @@ pub struct ImuSection {
     /// `lio::still`).
     pub still_window_s: f64,
     pub still_sigma_m_s: f64,
+    /// The accelerometer's turn-on bias (1 sigma) that a still start takes for gravity: > 0
+    /// ties the two in the filter's start (`lio::start`), 0 starts them apart.
+    pub acc_bias_sigma_m_s2: f64,
     /// Continuous-time noise densities (per sqrt(s)).
     pub gyro_noise_rad_s: f64,
     pub acc_noise_m_s2: f64,
@@ -59,6 +62,7 @@ impl Default for ImuSection {
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             still_window_s: 0.5,
             still_sigma_m_s: 0.05,
+            acc_bias_sigma_m_s2: 0.0,
             gyro_noise_rad_s: noise.gyro_rad_s,
             acc_noise_m_s2: noise.acc_m_s2,
             gyro_bias_walk: noise.gyro_bias_walk,
@@ -288,6 +292,12 @@ impl LioFile {
                 .into()));
         }
         self.health.validate().map_err(bad)?;
+        if !(self.imu.acc_bias_sigma_m_s2.is_finite() && self.imu.acc_bias_sigma_m_s2 >= 0.0) {
+            return Err(bad(format!(
+                "imu.acc_bias_sigma_m_s2 must be a number >= 0, not {}",
+                self.imu.acc_bias_sigma_m_s2
+            )));
+        }
         if !(self.imu.still_sigma_m_s.is_finite() && self.imu.still_sigma_m_s >= 0.0) {
             return Err(bad(format!("imu.still_sigma_m_s must be a number >= 0, not {}", self.imu.still_sigma_m_s)));
         }
@@ -307,6 +317,7 @@ impl LioFile {
             init_max_acc_std_m_s2: self.imu.init_max_acc_std_m_s2,
             still_window_ns: (self.imu.still_window_s * 1e9) as u64,
             still_sigma_m_s: self.imu.still_sigma_m_s,
+            acc_bias_sigma_m_s2: self.imu.acc_bias_sigma_m_s2,
             noise,
             update: UpdateConfig {
                 max_iterations: self.update.max_iterations,
@@ -357,5 +368,7 @@ mod tests {
         let e = LioFile::from_toml("[scan]\nvoxel_m = -1.0\n").unwrap_err().to_string();
         assert!(e.contains("scan.voxel_m"), "{e}");
         assert!(LioFile::from_toml("[imu]\nsource = \"gps\"\n").is_err());
+        let e = LioFile::from_toml("[imu]\nacc_bias_sigma_m_s2 = -0.05\n").unwrap_err().to_string();
+        assert!(e.contains("imu.acc_bias_sigma_m_s2"), "{e}");
     }
 }

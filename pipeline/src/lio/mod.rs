@@ -19,6 +19,7 @@ mod plane;
 mod propagate;
 mod so3;
 mod stand;
+mod start;
 mod state;
 mod still;
 mod types;

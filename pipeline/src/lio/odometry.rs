@@ -7,7 +7,8 @@ use super::ivox::VoxelMap;
 use super::level::{level_update, LevelWindow};
 use super::propagate::{step, ImuNoise, Knot};
 use super::stand::{base_position, hold_update, stands};
-use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
+use super::start::start_covariance;
+use super::state::{Cov, State, POS, ROT, VEL};
 use super::still::{zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
@@ -30,6 +31,9 @@ pub struct LioConfig {
     /// `still_window_ns` (`still_sigma_m_s` 0: never; see [`super::still`]).
     pub still_window_ns: u64,
     pub still_sigma_m_s: f64,
+    /// The accelerometer bias's spread that a still start cannot tell from gravity; > 0 ties the
+    /// two in the start's uncertainty, 0 starts them apart (see [`super::start`]).
+    pub acc_bias_sigma_m_s2: f64,
     pub noise: ImuNoise,
     pub update: UpdateConfig,
     /// Scan downsampling (voxel centroid) before the update.
@@ -60,6 +64,7 @@ impl Default for LioConfig {
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             still_window_ns: 500_000_000,
             still_sigma_m_s: 0.05,
+            acc_bias_sigma_m_s2: 0.0,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
@@ -284,15 +289,7 @@ impl Lio {
         self.state.rot = r.rot_world_imu;
         self.state.bias_gyro = r.bias_gyro;
         self.state.gravity = Vector3::new(0.0, 0.0, -r.gravity_m_s2);
-        let mut cov = Cov::zeros();
-        // The gyro bias is as uncertain as the gyro was unsteady while "still".
-        let bias_var = r.gyro_std_rad_s.powi(2).max(1e-6);
-        for (at, v) in [(ROT, 1e-4), (POS, 1e-6), (VEL, 1e-4), (BG, bias_var), (BA, 1e-3), (GRAV, 1e-4)] {
-            for i in at..at + 3 {
-                cov[(i, i)] = v;
-            }
-        }
-        self.cov = cov;
+        self.cov = start_covariance(r, self.cfg.acc_bias_sigma_m_s2);
         self.state_ns = r.end_ns;
         self.held = Some(last);
         self.status = LioStatus::Running;

@@ -96,12 +96,17 @@ pub const RIG_RESIDUAL_VAR_M2: f64 = 0.03;
 /// alone leave a walker's motion along the wall to the IMU, and say so. The generic 1e-4 only
 /// drops what a scene does not see at all.
 pub const RIG_MIN_DIRECTION_INFO: f64 = 0.001;
+/// The rig's accelerometer bias (1 sigma, m/s^2; config/lio_rig.toml) that its still start
+/// takes for gravity, tied to the gravity in the filter's start (`lio::start`): the BMI088's
+/// turn-on spread as the simulator draws it (docs/lio.md, "The rig's accelerometer bias").
+pub const RIG_ACC_BIAS_SIGMA_M_S2: f64 = 0.05;
 
 impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
-    /// [`RIG_RESIDUAL_VAR_M2`] and [`RIG_MIN_DIRECTION_INFO`].
+    /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`] and [`RIG_ACC_BIAS_SIGMA_M_S2`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
+            acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
             noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             update: UpdateConfig {
                 residual_var_m2: RIG_RESIDUAL_VAR_M2,
@@ -811,7 +816,8 @@ fn window(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::{
-        start_offset_m, RigCore, RigCoreConfig, RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2,
+        start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO,
+        RIG_RESIDUAL_VAR_M2,
     };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
@@ -823,9 +829,9 @@ mod tests {
         let file = LioFile::from_toml(include_str!("../../../config/lio_rig.toml")).unwrap();
         assert_eq!(file.to_config().unwrap(), RigCoreConfig::rig_lio());
         assert_eq!(RigCoreConfig::default().lio, RigCoreConfig::rig_lio());
-        // Everything but the gyro's noise and the update's residual variance and weak-direction
-        // threshold is the LIO's generic default.
-        let mut generic = LioConfig::default();
+        // Everything but the gyro's noise, the update's residual variance and weak-direction
+        // threshold and the accelerometer bias tied to gravity is the LIO's generic default.
+        let mut generic = LioConfig { acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2, ..LioConfig::default() };
         generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
         generic.update.residual_var_m2 = RIG_RESIDUAL_VAR_M2;
         generic.update.min_direction_info = RIG_MIN_DIRECTION_INFO;
