@@ -71,6 +71,11 @@ pub const COVERAGE_MIN_CROSSINGS: u16 = 2;
 /// heading by a few tenths of a degree, which a long drive turns into centimetres. 0.001 is four
 /// times the BMI088's density (docs/lio.md, "The robot's gyro noise").
 pub const ROBOT_GYRO_NOISE_RAD_S: f64 = 0.001;
+/// The robot's accelerometer bias (1 sigma, m/s^2; config/lio_robot.toml) that its still start
+/// takes for gravity, tied to the gravity in the filter's start (`lio::start`), as the rig's: its
+/// map keeps the start's lean, and gravity leans with it, instead of the attitude being turned
+/// level under a map already built (docs/lio.md, "The rig's accelerometer bias").
+pub const ROBOT_ACC_BIAS_SIGMA_M_S2: f64 = 0.05;
 /// The variance the robot's LIO gives one point-to-plane residual (m^2; config/lio_robot.toml).
 /// The generic 0.001 (3 cm) takes a scan's thousand centroids as independent. They are not:
 /// each is matched to a plane fitted to a map the same poses built, so one scan's errors move
@@ -100,6 +105,7 @@ impl RobotCoreConfig {
         LioConfig {
             noise: ImuNoise { gyro_rad_s: ROBOT_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             still_sigma_m_s: 0.0,
+            acc_bias_sigma_m_s2: ROBOT_ACC_BIAS_SIGMA_M_S2,
             wheel: WheelFusion { pos_imu_base: ROBOT_IMU_T_BASE_M.into(), ..WheelFusion::default() },
             scan_voxel_m: ROBOT_SCAN_VOXEL_M,
             map_voxel_m: ROBOT_MAP_VOXEL_M,
@@ -382,12 +388,14 @@ mod tests {
         let robot = RobotCoreConfig::robot_lio();
         assert_eq!(robot.wheel.pos_imu_base, nalgebra::Vector3::from(ROBOT_IMU_T_BASE_M));
         assert_eq!(robot.still_sigma_m_s, 0.0);
+        assert_eq!(robot.acc_bias_sigma_m_s2, ROBOT_ACC_BIAS_SIGMA_M_S2);
         assert_eq!(robot.update, UpdateConfig { residual_var_m2: ROBOT_RESIDUAL_VAR_M2, ..generic.update });
         assert_eq!(
             LioConfig {
                 noise: generic.noise,
                 wheel: generic.wheel.clone(),
                 still_sigma_m_s: generic.still_sigma_m_s,
+                acc_bias_sigma_m_s2: generic.acc_bias_sigma_m_s2,
                 scan_voxel_m: generic.scan_voxel_m,
                 map_voxel_m: generic.map_voxel_m,
                 update: generic.update,
