@@ -292,14 +292,14 @@ impl LioFile {
                 .into()));
         }
         self.health.validate().map_err(bad)?;
-        if !(self.imu.acc_bias_sigma_m_s2.is_finite() && self.imu.acc_bias_sigma_m_s2 >= 0.0) {
-            return Err(bad(format!(
-                "imu.acc_bias_sigma_m_s2 must be a number >= 0, not {}",
-                self.imu.acc_bias_sigma_m_s2
-            )));
-        }
-        if !(self.imu.still_sigma_m_s.is_finite() && self.imu.still_sigma_m_s >= 0.0) {
-            return Err(bad(format!("imu.still_sigma_m_s must be a number >= 0, not {}", self.imu.still_sigma_m_s)));
+        let non_negative = [
+            ("imu.still_sigma_m_s", self.imu.still_sigma_m_s),
+            ("imu.acc_bias_sigma_m_s2", self.imu.acc_bias_sigma_m_s2),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(format!("{name} must be a number >= 0, not {v}")));
+            }
         }
         let [r, p, y] = self.extrinsics.rotation_rpy_deg.map(f64::to_radians);
         let noise = ImuNoise {

@@ -6,8 +6,9 @@
 //! `b_a` the same unknown. Started as two independent unknowns (a gravity held to 0.01 m/s^2 and
 //! a bias to 0.03), a bias the filter later learns (the IMU's readings turn with the device, a
 //! lean of the world does not) cannot move the gravity with it, and the mismatch integrates into
-//! velocity wherever the scans constrain little: the rig's case (docs/lio.md, "The rig's
-//! accelerometer bias").
+//! velocity wherever the scans constrain little (the rig), or a tilt measurement turns the
+//! attitude level under a map built leaning (the robot; docs/lio.md, "The rig's accelerometer
+//! bias").
 
 use super::init::InitResult;
 use super::state::{Cov, BA, BG, GRAV, POS, ROT, VEL};
@@ -69,22 +70,18 @@ mod tests {
         }
     }
 
-    /// The still reading `f = R^T (-g) + b_a` as a function of (gravity, bias) errors.
+    /// The still reading `f = R^T (-g) + b_a` as a function of the (bias, gravity) errors.
     fn reading_jacobian(r: &Rotation3<f64>) -> SMatrix<f64, 3, 6> {
         let mut h = SMatrix::<f64, 3, 6>::zeros();
-        h.fixed_view_mut::<3, 3>(0, 0).copy_from(&-r.matrix().transpose());
-        h.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+        h.fixed_view_mut::<3, 3>(0, 0).copy_from(&Matrix3::identity());
+        h.fixed_view_mut::<3, 3>(0, 3).copy_from(&-r.matrix().transpose());
         h
     }
 
-    fn gravity_and_bias(cov: &Cov) -> SMatrix<f64, 6, 6> {
-        let mut m = SMatrix::<f64, 6, 6>::zeros();
-        for (a, i) in [GRAV, GRAV + 1, GRAV + 2, BA, BA + 1, BA + 2].into_iter().enumerate() {
-            for (b, j) in [GRAV, GRAV + 1, GRAV + 2, BA, BA + 1, BA + 2].into_iter().enumerate() {
-                m[(a, b)] = cov[(i, j)];
-            }
-        }
-        m
+    /// The bias and gravity blocks and their cross terms (adjacent in the error state).
+    fn bias_and_gravity(cov: &Cov) -> SMatrix<f64, 6, 6> {
+        assert_eq!(GRAV, BA + 3);
+        cov.fixed_view::<6, 6>(BA, BA).into_owned()
     }
 
     #[test]
@@ -92,7 +89,7 @@ mod tests {
         let r = tilted_start();
         let cov = start_covariance(&r, 0.05);
         let h = reading_jacobian(&r.rot_world_imu);
-        let reading_var = h * gravity_and_bias(&cov) * h.transpose();
+        let reading_var = h * bias_and_gravity(&cov) * h.transpose();
         // Only the gravity's own slack is left; the bias alone may be off by 0.05 on each axis.
         assert!(reading_var.trace() < 4.0 * GRAVITY_SLACK_VAR, "{reading_var}");
         assert!((cov[(BA, BA)] - 0.0025).abs() < 1e-12);
@@ -110,7 +107,7 @@ mod tests {
         assert_eq!(cov[(GRAV + 2, GRAV + 2)], GRAVITY_VAR);
         assert_eq!(cov[(BG, BG)], 1e-6_f64.max(0.002_f64.powi(2)));
         let h = reading_jacobian(&r.rot_world_imu);
-        let reading_var = h * gravity_and_bias(&cov) * h.transpose();
+        let reading_var = h * bias_and_gravity(&cov) * h.transpose();
         assert!(reading_var.trace() > 3.0 * ACC_BIAS_VAR, "apart, the reading's two causes add up");
     }
 }
