@@ -3,6 +3,10 @@
 
     scripts/rig_diag_summary.py OUT...                  per building: searches, the attempt from
                                                         the truth right, searches right / wrong
+    scripts/rig_diag_summary.py --timeline OUT...       per building, one character a search:
+                                                        the attempt from the truth right (T) or
+                                                        not (.), and the search right (R), wrong
+                                                        (W) or refused (.)
     scripts/rig_diag_summary.py --rivals K M OUT...     replay the rival rule on the rivals each
                                                         accepted attempt recorded (run rig_diag with
                                                         correlative_rival_min_known = 1 to record
@@ -54,11 +58,17 @@ def read(path):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--rivals', nargs=2, type=float, metavar=('K', 'M'))
+    ap.add_argument('--timeline', action='store_true')
     ap.add_argument('outputs', nargs='+')
     a = ap.parse_args()
     total = collections.Counter()
     for path in a.outputs:
         searches, judged = read(path)
+        if a.timeline:
+            truth = ''.join('T' if s['truth_right'] else '.' for s in searches)
+            found = ''.join({'right': 'R', None: '.'}.get(s['outcome'], 'W') for s in searches)
+            print(f'{path}\n  truth  {truth}\n  search {found}')
+            continue
         c = collections.Counter(searches=len(searches), truth_right=sum(s['truth_right'] for s in searches))
         if a.rivals:
             k, margin = a.rivals
@@ -69,7 +79,8 @@ def main():
             c.update(s['outcome'] for s in searches if s['outcome'])
         total.update(c)
         print(path, dict(c))
-    print('all', dict(total))
+    if not a.timeline:
+        print('all', dict(total))
 
 
 if __name__ == '__main__':
