@@ -2,15 +2,20 @@
 //! the responder goes in), sans-IO: an occupancy grid of the floor from the robot's placed
 //! scans ([`OccupancyGrid`]) and the frontiers between its known floor and the unknown
 //! ([`frontiers`]), the floor the base can use and the travel over it ([`usable`], [`Costs`]),
-//! and the frontier worth going to ([`choose_goal`]). Local control and driving the base come
-//! on top of these.
+//! and the frontier worth going to ([`choose_goal`]), and the twist that drives the omni base
+//! along the way, slowed for what the live scan sees ([`LocalController`]). Driving the base
+//! in the loop comes on top of these.
 
+mod control;
 mod frontier;
 mod occupancy;
 mod plan;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_control;
 
+pub use control::{clearance_m, BodyTwist, ControlConfig, ControlState, ControlStep, LocalController, Pose2};
 pub use frontier::{frontiers, is_frontier, Frontier};
 pub use occupancy::{Cell, OccupancyConfig, OccupancyGrid};
 pub use plan::{choose_goal, usable, Costs, GoalChoice, PlanConfig};

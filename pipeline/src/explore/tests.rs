@@ -220,3 +220,38 @@ fn a_frontier_past_a_door_narrower_than_the_robot_is_not_chosen() {
     let costs = Costs::from(&g, &usable(&g, robot, narrow.robot_radius_m), robot);
     assert!(choose_goal(&g, &found, &costs, &[], &narrow).is_some());
 }
+
+#[test]
+fn the_controller_drives_the_planned_way_through_the_doorway_without_touching_a_wall() {
+    let g = room_with_door(1.0);
+    let robot = at(&g, 1.0, 2.0);
+    let cfg = PlanConfig::default();
+    let costs = Costs::from(&g, &usable(&g, robot, cfg.robot_radius_m), robot);
+    let choice = choose_goal(&g, &frontiers(&g, 3), &costs, &[], &cfg).expect("a goal");
+    let path: Vec<[f64; 2]> = costs.path_to(choice.goal).into_iter().map(|c| g.centre_of(c)).collect();
+    // The controller's obstacles: the walls as the live scan sees them, and the grid's occupied
+    // cells within 1.5 m (the door's posts, beside the base as it passes, out of the view).
+    let walls: Vec<[f64; 2]> = room_scan().iter().filter(|p| p.z > 0.5).map(|p| [p.x, p.y]).collect();
+    let side = g.side();
+    let occupied: Vec<[f64; 2]> = (0..side * side)
+        .map(|k| (k % side, k / side))
+        .filter(|&c| g.cell(c) == Cell::Occupied)
+        .map(|c| g.centre_of(c))
+        .collect();
+    let obstacles = |p: &Pose2| {
+        let near = occupied.iter().filter(|o| (o[0] - p.x_m).hypot(o[1] - p.y_m) < 1.5).copied();
+        let mut seen = super::tests_control::seen(p, &walls);
+        seen.extend(super::tests_control::in_body(p, near));
+        seen
+    };
+    let start = Pose2 { x_m: 1.0, y_m: 2.0, yaw_rad: 0.0 };
+    let steps = super::tests_control::run_with(start, &path, 1200, obstacles);
+    let (end, last) = steps.last().expect("steps");
+    assert_eq!(last.state, ControlState::Arrived, "{end:?}");
+    let radius = ControlConfig::default().robot_radius_m;
+    for (p, s) in &steps {
+        let nearest = walls.iter().map(|w| (w[0] - p.x_m).hypot(w[1] - p.y_m)).fold(f64::INFINITY, f64::min);
+        assert!(nearest > radius, "{nearest} m from a wall at {p:?}");
+        assert!(!matches!(s.state, ControlState::Blocked { .. }), "{s:?} at {p:?}");
+    }
+}
