@@ -3,10 +3,11 @@
 //! scans ([`OccupancyGrid`]) and the frontiers between its known floor and the unknown
 //! ([`frontiers`]), the floor the base can use and the travel over it ([`usable`], [`Costs`]),
 //! and the frontier worth going to ([`choose_goal`]), and the twist that drives the omni base
-//! along the way, slowed for what the live scan sees ([`LocalController`]). Driving the base
-//! in the loop comes on top of these.
+//! along the way, slowed for what the live scan sees ([`LocalController`]); and the loop of
+//! them, sweeps, blacklisting and the way home included ([`Explorer`]).
 
 mod control;
+mod explorer;
 mod frontier;
 mod occupancy;
 mod plan;
@@ -14,8 +15,11 @@ mod plan;
 mod tests;
 #[cfg(test)]
 mod tests_control;
+#[cfg(test)]
+mod tests_explorer;
 
 pub use control::{clearance_m, BodyTwist, ControlConfig, ControlState, ControlStep, LocalController, Pose2};
+pub use explorer::{ExploreConfig, ExploreState, ExploreStep, Explorer};
 pub use frontier::{frontiers, is_frontier, Frontier};
 pub use occupancy::{Cell, OccupancyConfig, OccupancyGrid};
 pub use plan::{choose_goal, usable, Costs, GoalChoice, PlanConfig};

@@ -140,6 +140,29 @@ impl OccupancyGrid {
         })
     }
 
+    /// The floor under the base, `radius_m` around (x, y), is free floor at the grid's floor
+    /// height: it stood there. The LiDAR never sees the floor right under and beside it, and
+    /// without this the way back to where the base started would end short of it.
+    pub fn mark_driven(&mut self, x: f64, y: f64, radius_m: f64) {
+        let Some((ci, cj)) = self.cell_of(x, y) else { return };
+        let r = (radius_m.max(0.0) / self.cfg.cell_m).ceil().min(self.side as f64) as i64;
+        for dj in -r..=r {
+            for di in -r..=r {
+                let (i, j) = (ci as i64 + di, cj as i64 + dj);
+                if i < 0 || j < 0 || ((di * di + dj * dj) as f64).sqrt() * self.cfg.cell_m > radius_m {
+                    continue;
+                }
+                let Some(k) = self.index((i as usize, j as usize)) else { continue };
+                if let (Some(v), Some(f)) = (self.log_odds.get_mut(k), self.floor_m.get_mut(k)) {
+                    *v = -CLAMP;
+                    if !f.is_finite() {
+                        *f = self.cfg.floor_z_m as f32;
+                    }
+                }
+            }
+        }
+    }
+
     /// Adds one placed scan: the sensor at `origin` (world), its returns in the world. Cells an
     /// obstacle return falls in are not cleared by the same scan's rays or floor returns (the
     /// floor at a wall's foot shares its cell).

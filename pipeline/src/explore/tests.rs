@@ -255,3 +255,18 @@ fn the_controller_drives_the_planned_way_through_the_doorway_without_touching_a_
         assert!(!matches!(s.state, ControlState::Blocked { .. }), "{s:?} at {p:?}");
     }
 }
+
+#[test]
+fn the_floor_the_base_stood_on_is_traversable() {
+    let mut g = grid();
+    let here = at(&g, 1.0, 2.0);
+    assert_eq!(g.cell(here), Cell::Unknown);
+    g.mark_driven(1.0, 2.0, 0.3);
+    assert!(g.traversable(here) && g.traversable(at(&g, 1.25, 2.0)));
+    assert_eq!(g.cell(at(&g, 1.45, 2.0)), Cell::Unknown, "outside the radius");
+    // Nothing bad from places off the grid, NaN or a radius wider than the grid.
+    g.mark_driven(f64::NAN, 2.0, 0.3);
+    g.mark_driven(1e9, 2.0, 0.3);
+    g.mark_driven(1.0, 2.0, 1e12);
+    assert!(g.traversable(at(&g, 9.0, 9.0)));
+}

@@ -1,0 +1,280 @@
+//! Exploration as one loop, sans-IO: placed scans grow the grid ([`Explorer::add_scan`]), and
+//! once per control period ([`Explorer::step`]) the explorer turns the grid into the base's
+//! twist. It sweeps a full turn where it stands (the Avia sees 70 deg), chooses the frontier
+//! worth most, drives the planned way there, sweeps again, and so on; a goal it cannot reach
+//! (blocked, or no nearer for `stuck_s`) is blacklisted; when no frontier can be reached it
+//! drives back to where it started. An operator's stop holds it until released.
+
+use super::control::{BodyTwist, ControlConfig, ControlState, LocalController, Pose2};
+use super::frontier::{frontiers, is_frontier};
+use super::occupancy::{OccupancyConfig, OccupancyGrid};
+use super::plan::{choose_goal, usable, Costs, PlanConfig};
+use nalgebra::Vector3;
+use std::f64::consts::TAU;
+
+/// Settings of the loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExploreConfig {
+    pub occupancy: OccupancyConfig,
+    pub plan: PlanConfig,
+    pub control: ControlConfig,
+    /// Frontiers of fewer cells are left out.
+    pub min_frontier_cells: usize,
+    /// The way is planned again this often (s): the grid grows as the base drives.
+    pub replan_s: f64,
+    /// A goal the base has come no nearer to (by `progress_m`) for this long is blacklisted.
+    pub stuck_s: f64,
+    pub progress_m: f64,
+    /// A full turn in place at the start and at every goal reached.
+    pub sweep: bool,
+    /// Drive back to the start once no frontier can be reached.
+    pub return_home: bool,
+}
+
+impl Default for ExploreConfig {
+    fn default() -> Self {
+        Self {
+            occupancy: OccupancyConfig::default(),
+            plan: PlanConfig::default(),
+            control: ControlConfig::default(),
+            min_frontier_cells: 5,
+            replan_s: 1.0,
+            stuck_s: 6.0,
+            progress_m: 0.2,
+            sweep: true,
+            return_home: true,
+        }
+    }
+}
+
+/// What the explorer is doing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ExploreState {
+    /// Turning in place to look around; `turned_rad` so far.
+    Sweeping { turned_rad: f64 },
+    /// Driving to a frontier's goal (world x, y).
+    Going { goal_m: [f64; 2] },
+    /// No frontier left that can be reached: driving back to the start.
+    Returning,
+    /// Back at the start with nothing left to explore, or nowhere to go: standing.
+    Done,
+    /// Held by the operator: standing until released.
+    Stopped,
+}
+
+/// The command of one period and what the explorer is doing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExploreStep {
+    pub twist: BodyTwist,
+    pub state: ExploreState,
+    /// What the local controller said (None while sweeping, done or stopped).
+    pub control: Option<ControlState>,
+}
+
+/// The explorer; see the module's documentation.
+pub struct Explorer {
+    cfg: ExploreConfig,
+    grid: OccupancyGrid,
+    controller: LocalController,
+    state: ExploreState,
+    held: bool,
+    home_m: [f64; 2],
+    path: Vec<[f64; 2]>,
+    blacklist: Vec<[f64; 2]>,
+    planned_at_s: f64,
+    /// The nearest the base has come to the goal, and when.
+    best: (f64, f64),
+    last_yaw: Option<f64>,
+}
+
+impl Explorer {
+    /// An explorer starting at `home` (world x, y), its grid centred there. `None` for a grid
+    /// the settings cannot make ([`OccupancyGrid::new`]).
+    pub fn new(cfg: ExploreConfig, home: [f64; 2]) -> Option<Self> {
+        let grid = OccupancyGrid::new(cfg.occupancy, home)?;
+        // Without sweeps, the start's is taken as done: the first step plans.
+        let state = ExploreState::Sweeping { turned_rad: if cfg.sweep { 0.0 } else { TAU } };
+        Some(Self {
+            cfg,
+            grid,
+            controller: LocalController::new(cfg.control),
+            state,
+            held: false,
+            home_m: home,
+            path: Vec::new(),
+            blacklist: Vec::new(),
+            planned_at_s: f64::NEG_INFINITY,
+            best: (f64::INFINITY, 0.0),
+            last_yaw: None,
+        })
+    }
+
+    pub fn grid(&self) -> &OccupancyGrid {
+        &self.grid
+    }
+
+    pub fn state(&self) -> ExploreState {
+        if self.held {
+            ExploreState::Stopped
+        } else {
+            self.state
+        }
+    }
+
+    /// Goals given up on (world x, y).
+    pub fn blacklist(&self) -> &[[f64; 2]] {
+        &self.blacklist
+    }
+
+    /// The way being driven (world x, y), empty when none.
+    pub fn path(&self) -> &[[f64; 2]] {
+        &self.path
+    }
+
+    /// One placed scan: the sensor's origin and its returns in the world.
+    pub fn add_scan<'a>(&mut self, origin: &Vector3<f64>, points: impl IntoIterator<Item = &'a Vector3<f64>> + Clone) {
+        self.grid.add_scan(origin, points);
+    }
+
+    /// The operator's stop: the base stands from the next step until [`Explorer::release`].
+    pub fn hold(&mut self) {
+        self.held = true;
+        self.controller.reset();
+    }
+
+    pub fn release(&mut self) {
+        self.held = false;
+        self.planned_at_s = f64::NEG_INFINITY;
+    }
+
+    /// One control period at `now_s`: the twist for the base at `pose`, with `obstacles` as
+    /// [`LocalController::step`] takes them.
+    pub fn step(&mut self, now_s: f64, pose: &Pose2, obstacles: &[[f64; 2]], dt_s: f64) -> ExploreStep {
+        let turned = self.turned_since_last(pose.yaw_rad);
+        if pose.x_m.is_finite() && pose.y_m.is_finite() {
+            self.grid.mark_driven(pose.x_m, pose.y_m, self.cfg.control.robot_radius_m);
+        }
+        if self.held {
+            return standing(ExploreState::Stopped);
+        }
+        match self.state {
+            ExploreState::Sweeping { turned_rad } => {
+                let turned_rad = turned_rad + turned;
+                if turned_rad < TAU {
+                    self.state = ExploreState::Sweeping { turned_rad };
+                    let twist = BodyTwist { wz_rad_s: self.cfg.control.max_turn_rad_s, ..BodyTwist::ZERO };
+                    return ExploreStep { twist, state: self.state, control: None };
+                }
+                self.plan(now_s, pose);
+            }
+            ExploreState::Going { .. } | ExploreState::Returning if now_s - self.planned_at_s >= self.cfg.replan_s => {
+                self.replan(now_s, pose);
+            }
+            _ => {}
+        }
+        self.drive(now_s, pose, obstacles, dt_s)
+    }
+
+    /// The controller along the way, and what its outcome means for the loop.
+    fn drive(&mut self, now_s: f64, pose: &Pose2, obstacles: &[[f64; 2]], dt_s: f64) -> ExploreStep {
+        let goal = match self.state {
+            ExploreState::Going { goal_m } => goal_m,
+            ExploreState::Returning => self.home_m,
+            _ => return standing(self.state),
+        };
+        let step = self.controller.step(pose, &self.path, obstacles, dt_s);
+        let distance = (goal[0] - pose.x_m).hypot(goal[1] - pose.y_m);
+        if distance < self.best.0 - self.cfg.progress_m {
+            self.best = (distance, now_s);
+        }
+        match (step.state, self.state) {
+            (ControlState::Arrived, ExploreState::Going { .. }) => {
+                self.state =
+                    if self.cfg.sweep { ExploreState::Sweeping { turned_rad: 0.0 } } else { self.after(now_s, pose) };
+            }
+            (ControlState::Arrived, _) => self.state = ExploreState::Done,
+            (ControlState::Idle, _) => self.replan(now_s, pose),
+            (_, ExploreState::Returning) if now_s - self.best.1 > self.cfg.stuck_s => self.state = self.nowhere(),
+            _ if now_s - self.best.1 > self.cfg.stuck_s => {
+                self.blacklist.push(goal);
+                self.replan(now_s, pose);
+            }
+            _ => {}
+        }
+        ExploreStep { twist: step.twist, state: self.state, control: Some(step.state) }
+    }
+
+    /// The way is planned again: to the same goal while it is still a frontier's, else to the
+    /// next one.
+    fn replan(&mut self, now_s: f64, pose: &Pose2) {
+        if let ExploreState::Going { goal_m } = self.state {
+            let still = self.grid.cell_of(goal_m[0], goal_m[1]).is_some_and(|c| is_frontier(&self.grid, c))
+                && !self.blacklist.contains(&goal_m);
+            if still && self.way_to(pose, goal_m) {
+                self.planned_at_s = now_s;
+                return;
+            }
+        }
+        self.plan(now_s, pose);
+    }
+
+    /// Chooses the next goal and the way there.
+    fn plan(&mut self, now_s: f64, pose: &Pose2) {
+        self.state = self.after(now_s, pose);
+    }
+
+    /// Where to go from `pose`: the best frontier, else home, else nowhere.
+    fn after(&mut self, now_s: f64, pose: &Pose2) -> ExploreState {
+        self.planned_at_s = now_s;
+        self.best = (f64::INFINITY, now_s);
+        let Some(robot) = self.grid.cell_of(pose.x_m, pose.y_m) else { return self.nowhere() };
+        let costs = Costs::from(&self.grid, &usable(&self.grid, robot, self.cfg.plan.robot_radius_m), robot);
+        let found = frontiers(&self.grid, self.cfg.min_frontier_cells);
+        if let Some(choice) = choose_goal(&self.grid, &found, &costs, &self.blacklist, &self.cfg.plan) {
+            self.path = costs.path_to(choice.goal).into_iter().map(|c| self.grid.centre_of(c)).collect();
+            return ExploreState::Going { goal_m: self.grid.centre_of(choice.goal) };
+        }
+        let home = self.home_m;
+        let at_home = (home[0] - pose.x_m).hypot(home[1] - pose.y_m) <= self.cfg.control.goal_tolerance_m;
+        if self.cfg.return_home && !at_home && self.way_to(pose, home) {
+            return ExploreState::Returning;
+        }
+        self.nowhere()
+    }
+
+    fn nowhere(&mut self) -> ExploreState {
+        self.path.clear();
+        ExploreState::Done
+    }
+
+    /// Plans the way from `pose` to `goal`; false when it cannot be reached.
+    fn way_to(&mut self, pose: &Pose2, goal: [f64; 2]) -> bool {
+        let (Some(robot), Some(target)) = (self.grid.cell_of(pose.x_m, pose.y_m), self.grid.cell_of(goal[0], goal[1]))
+        else {
+            return false;
+        };
+        let costs = Costs::from(&self.grid, &usable(&self.grid, robot, self.cfg.plan.robot_radius_m), robot);
+        let path = costs.path_to(target);
+        if path.is_empty() {
+            return false;
+        }
+        self.path = path.into_iter().map(|c| self.grid.centre_of(c)).collect();
+        true
+    }
+
+    /// How far the base has turned since the last step (rad, unsigned).
+    fn turned_since_last(&mut self, yaw_rad: f64) -> f64 {
+        let turned = self.last_yaw.filter(|_| yaw_rad.is_finite()).map_or(0.0, |last| {
+            let d = yaw_rad - last;
+            d.sin().atan2(d.cos()).abs()
+        });
+        if yaw_rad.is_finite() {
+            self.last_yaw = Some(yaw_rad);
+        }
+        turned
+    }
+}
+
+fn standing(state: ExploreState) -> ExploreStep {
+    ExploreStep { twist: BodyTwist::ZERO, state, control: None }
+}

@@ -1,0 +1,184 @@
+//! The explorer in a closed loop on a synthetic floor: two 6 x 4 m rooms joined by a doorway,
+//! scanned by a 2D stand-in for the Avia (rays every 2 deg over its 70 deg, walls in the body
+//! band, floor returns along each ray), the base moving exactly as commanded.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use super::tests_control::in_body;
+use super::*;
+use nalgebra::Vector3;
+
+const DT_S: f64 = 0.05;
+/// A scan every this many control periods (5 Hz).
+const SCAN_EVERY: usize = 4;
+
+type Segment = ([f64; 2], [f64; 2]);
+
+/// Rooms A (x 0-6) and B (x 6-12), y 0-4, the doorway between them at y 1.5-2.7.
+fn two_rooms() -> Vec<Segment> {
+    vec![
+        ([0.0, 0.0], [12.0, 0.0]),
+        ([12.0, 0.0], [12.0, 4.0]),
+        ([12.0, 4.0], [0.0, 4.0]),
+        ([0.0, 4.0], [0.0, 0.0]),
+        ([6.0, 0.0], [6.0, 1.5]),
+        ([6.0, 2.7], [6.0, 4.0]),
+    ]
+}
+
+/// Where a ray from `o` along `d` (unit) first meets a wall, within 15 m.
+fn hit(walls: &[Segment], o: [f64; 2], d: [f64; 2]) -> Option<f64> {
+    walls
+        .iter()
+        .filter_map(|&(a, b)| {
+            let e = [b[0] - a[0], b[1] - a[1]];
+            let den = d[0] * e[1] - d[1] * e[0];
+            if den.abs() < 1e-12 {
+                return None;
+            }
+            let w = [a[0] - o[0], a[1] - o[1]];
+            let t = (w[0] * e[1] - w[1] * e[0]) / den;
+            let u = (w[0] * d[1] - w[1] * d[0]) / den;
+            (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+        })
+        .filter(|&t| t <= 15.0)
+        .min_by(f64::total_cmp)
+}
+
+/// One scan from `p` (sensor 0.5 m up): per ray, floor returns every 0.1 m from 0.7 m out to
+/// the wall, and the wall at 0.3, 0.6 and 0.9 m; also the wall hits in the body frame (what
+/// the controller gets from the live scan).
+fn scan(walls: &[Segment], p: &Pose2) -> (Vec<Vector3<f64>>, Vec<[f64; 2]>) {
+    let (mut points, mut seen) = (Vec::new(), Vec::new());
+    for k in -17..=17 {
+        let bearing = f64::from(k) * 2.0f64.to_radians();
+        let a = p.yaw_rad + bearing;
+        let d = [a.cos(), a.sin()];
+        let Some(t) = hit(walls, [p.x_m, p.y_m], d) else { continue };
+        let mut r = 0.7;
+        while r < t {
+            points.push(Vector3::new(p.x_m + d[0] * r, p.y_m + d[1] * r, 0.0));
+            r += 0.1;
+        }
+        for z in [0.3, 0.6, 0.9] {
+            points.push(Vector3::new(p.x_m + d[0] * t, p.y_m + d[1] * t, z));
+        }
+        seen.push([t * bearing.cos(), t * bearing.sin()]);
+    }
+    (points, seen)
+}
+
+fn moved(p: &Pose2, t: &BodyTwist) -> Pose2 {
+    let (s, c) = p.yaw_rad.sin_cos();
+    Pose2 {
+        x_m: p.x_m + (c * t.vx_m_s - s * t.vy_m_s) * DT_S,
+        y_m: p.y_m + (s * t.vx_m_s + c * t.vy_m_s) * DT_S,
+        yaw_rad: p.yaw_rad + t.wz_rad_s * DT_S,
+    }
+}
+
+/// The distance from `p` to the nearest wall.
+fn to_wall(walls: &[Segment], p: &Pose2) -> f64 {
+    walls
+        .iter()
+        .map(|&(a, b)| {
+            let e = [b[0] - a[0], b[1] - a[1]];
+            let f = (((p.x_m - a[0]) * e[0] + (p.y_m - a[1]) * e[1]) / (e[0] * e[0] + e[1] * e[1])).clamp(0.0, 1.0);
+            (a[0] + f * e[0] - p.x_m).hypot(a[1] + f * e[1] - p.y_m)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// A run: each period's pose and step, until the explorer is done or `max_s` passes. `extra`
+/// are obstacles only the live scan sees (world x, y): someone standing.
+struct Run {
+    steps: Vec<(Pose2, ExploreStep)>,
+    explorer: Explorer,
+}
+
+fn explore(start: Pose2, extra: &[[f64; 2]], max_s: f64) -> Run {
+    let walls = two_rooms();
+    let cfg = ExploreConfig {
+        occupancy: OccupancyConfig { extent_m: 30.0, ..OccupancyConfig::default() },
+        ..Default::default()
+    };
+    let mut explorer = Explorer::new(cfg, [start.x_m, start.y_m]).unwrap();
+    let mut pose = start;
+    let mut live = Vec::new();
+    let mut steps = Vec::new();
+    for k in 0..(max_s / DT_S) as usize {
+        if k % SCAN_EVERY == 0 {
+            let (points, seen) = scan(&walls, &pose);
+            explorer.add_scan(&Vector3::new(pose.x_m, pose.y_m, 0.5), &points);
+            live = seen;
+        }
+        // The controller's obstacles: the live walls, who stands there, and the grid's
+        // occupied cells within 1.5 m.
+        let g = explorer.grid();
+        let side = g.side();
+        let near = (0..side * side)
+            .map(|c| (c % side, c / side))
+            .filter(|&c| g.cell(c) == Cell::Occupied)
+            .map(|c| g.centre_of(c))
+            .filter(|o| (o[0] - pose.x_m).hypot(o[1] - pose.y_m) < 1.5);
+        let mut obstacles = live.clone();
+        obstacles.extend(in_body(&pose, near.chain(extra.iter().copied())));
+        let step = explorer.step(k as f64 * DT_S, &pose, &obstacles, DT_S);
+        steps.push((pose, step));
+        if step.state == ExploreState::Done {
+            break;
+        }
+        pose = moved(&pose, &step.twist);
+    }
+    Run { steps, explorer }
+}
+
+#[test]
+fn two_rooms_are_explored_and_the_base_comes_home_without_touching_a_wall() {
+    let start = Pose2 { x_m: 1.5, y_m: 2.0, yaw_rad: 0.0 };
+    let run = explore(start, &[], 400.0);
+    let (end, last) = run.steps.last().unwrap();
+    assert_eq!(last.state, ExploreState::Done, "after {} s at {end:?}", run.steps.len() as f64 * DT_S);
+    assert!((end.x_m - 1.5).hypot(end.y_m - 2.0) < 0.2, "home: {end:?}");
+    // Both rooms' floor known (48 m², less what the base's radius keeps it from seeing close).
+    let area = run.explorer.grid().traversable_area_m2();
+    assert!(area > 38.0, "{area} m² of 48");
+    let radius = ControlConfig::default().robot_radius_m;
+    let closest = run.steps.iter().map(|(p, _)| to_wall(&two_rooms(), p)).fold(f64::INFINITY, f64::min);
+    assert!(closest > radius, "{closest} m from a wall");
+    // It went well into room B, and was done within a minute and a half.
+    assert!(run.steps.iter().any(|(p, _)| p.x_m > 8.0));
+    assert!(run.steps.len() as f64 * DT_S < 90.0, "{} s", run.steps.len() as f64 * DT_S);
+}
+
+#[test]
+fn a_goal_behind_someone_in_the_doorway_is_given_up_and_the_base_comes_home() {
+    let start = Pose2 { x_m: 1.5, y_m: 2.0, yaw_rad: 0.0 };
+    // Someone stands in the doorway; the grid is given the walls alone.
+    let person: Vec<[f64; 2]> = (0..12).map(|k| [6.0, 1.55 + f64::from(k) * 0.1]).collect();
+    let run = explore(start, &person, 400.0);
+    let (end, last) = run.steps.last().unwrap();
+    assert_eq!(last.state, ExploreState::Done, "{end:?}");
+    assert!(!run.explorer.blacklist().is_empty());
+    assert!(run.steps.iter().all(|(p, _)| p.x_m < 6.0), "never through the doorway");
+    assert!((end.x_m - 1.5).hypot(end.y_m - 2.0) < 0.2, "home: {end:?}");
+}
+
+#[test]
+fn the_operators_stop_holds_the_base_until_released() {
+    let walls = two_rooms();
+    let start = Pose2 { x_m: 1.5, y_m: 2.0, yaw_rad: 0.0 };
+    let mut e = Explorer::new(ExploreConfig::default(), [1.5, 2.0]).unwrap();
+    let (points, seen) = scan(&walls, &start);
+    e.add_scan(&Vector3::new(1.5, 2.0, 0.5), &points);
+    let first = e.step(0.0, &start, &seen, DT_S);
+    assert!(matches!(first.state, ExploreState::Sweeping { .. }) && first.twist.wz_rad_s > 0.0);
+    e.hold();
+    for k in 1..20 {
+        let s = e.step(f64::from(k) * DT_S, &start, &seen, DT_S);
+        assert_eq!((s.twist, s.state), (BodyTwist::ZERO, ExploreState::Stopped));
+    }
+    assert_eq!(e.state(), ExploreState::Stopped);
+    e.release();
+    let s = e.step(1.0, &start, &seen, DT_S);
+    assert!(matches!(s.state, ExploreState::Sweeping { .. }) && s.twist.wz_rad_s > 0.0, "{s:?}");
+}
