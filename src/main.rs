@@ -44,6 +44,9 @@ enum Command {
     Sim(cmd::sim::Args),
     /// Generate a building (flat, office, warehouse, hall, lab) as a scenario file.
     Gen(cmd::gen::Args),
+    /// The explorer on generated buildings, kinematic (ideal poses, an idealised Avia), beside
+    /// the scripted route: floor known, contacts, time per control step.
+    Explore(cmd::explore::Args),
     /// Run the mission on a range of generated buildings; eval.json, a summary and plots.
     Eval(cmd::eval::Args),
     /// The learned detector's training data from generated buildings (docs/pillars.md).
@@ -89,6 +92,7 @@ fn main() -> ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Sim(a) => cmd::sim::run(a),
         Command::Gen(a) => cmd::gen::run(a),
+        Command::Explore(a) => cmd::explore::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Dataset(a) => cmd::dataset::run(a),
         Command::Ptp(c) => cmd::ptp::run(c),

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod detector_arg;
 pub mod devices;
 pub mod eval;
+pub mod explore;
 pub mod export;
 pub mod fpv;
 pub mod gen;
