@@ -10,7 +10,13 @@ use super::frontier::{frontiers, is_frontier};
 use super::occupancy::{OccupancyConfig, OccupancyGrid};
 use super::plan::{choose_goal, usable, Costs, PlanConfig};
 use nalgebra::Vector3;
+use std::collections::VecDeque;
 use std::f64::consts::TAU;
+
+/// The remembered returns are kept one per cell of this size (m).
+const MEMORY_CELL_M: f64 = 0.05;
+/// Only remembered returns this near the base reach the controller (m).
+const MEMORY_RANGE_M: f64 = 1.5;
 
 /// Settings of the loop.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,6 +35,9 @@ pub struct ExploreConfig {
     pub sweep: bool,
     /// Drive back to the start once no frontier can be reached.
     pub return_home: bool,
+    /// The body-band returns of this many of the latest scans are kept and handed to the
+    /// controller with the caller's obstacles (0: none).
+    pub memory_scans: usize,
 }
 
 impl Default for ExploreConfig {
@@ -43,6 +52,8 @@ impl Default for ExploreConfig {
             progress_m: 0.2,
             sweep: true,
             return_home: true,
+            // 4 s at the Avia's 5 Hz of placed scans in the tests and `starc explore`.
+            memory_scans: 20,
         }
     }
 }
@@ -85,6 +96,8 @@ pub struct Explorer {
     /// The nearest the base has come to the goal, and when.
     best: (f64, f64),
     last_yaw: Option<f64>,
+    /// The latest scans' body-band returns (world x, y).
+    memory: VecDeque<Vec<[f64; 2]>>,
 }
 
 impl Explorer {
@@ -106,6 +119,7 @@ impl Explorer {
             planned_at_s: f64::NEG_INFINITY,
             best: (f64::INFINITY, 0.0),
             last_yaw: None,
+            memory: VecDeque::new(),
         })
     }
 
@@ -133,7 +147,42 @@ impl Explorer {
 
     /// One placed scan: the sensor's origin and its returns in the world.
     pub fn add_scan<'a>(&mut self, origin: &Vector3<f64>, points: impl IntoIterator<Item = &'a Vector3<f64>> + Clone) {
-        self.grid.add_scan(origin, points);
+        self.grid.add_scan(origin, points.clone());
+        self.remember(points);
+    }
+
+    /// Keeps the scan's returns in the body band, one per `MEMORY_CELL_M` cell, for the last
+    /// `memory_scans` scans: what stood beside the base a moment ago, now out of the Avia's
+    /// view and perhaps missing from the grid (a post whose returns split between two cells).
+    fn remember<'a>(&mut self, points: impl IntoIterator<Item = &'a Vector3<f64>>) {
+        let occ = &self.cfg.occupancy;
+        let (lo, hi) = (occ.floor_z_m + occ.max_step_m, occ.floor_z_m + occ.body_height_m);
+        let mut kept: Vec<[f64; 2]> = Vec::new();
+        let mut cells = std::collections::HashSet::new();
+        for p in points.into_iter().filter(|p| p.z > lo && p.z < hi && p.x.is_finite() && p.y.is_finite()) {
+            let key = ((p.x / MEMORY_CELL_M).floor() as i64, (p.y / MEMORY_CELL_M).floor() as i64);
+            if cells.insert(key) {
+                kept.push([p.x, p.y]);
+            }
+        }
+        self.memory.push_back(kept);
+        while self.memory.len() > self.cfg.memory_scans {
+            self.memory.pop_front();
+        }
+    }
+
+    /// The remembered returns within `MEMORY_RANGE_M` of `pose`, in its body frame.
+    fn remembered(&self, pose: &Pose2) -> Vec<[f64; 2]> {
+        let (s, c) = pose.yaw_rad.sin_cos();
+        self.memory
+            .iter()
+            .flatten()
+            .filter(|w| (w[0] - pose.x_m).hypot(w[1] - pose.y_m) < MEMORY_RANGE_M)
+            .map(|w| {
+                let (dx, dy) = (w[0] - pose.x_m, w[1] - pose.y_m);
+                [c * dx + s * dy, -s * dx + c * dy]
+            })
+            .collect()
     }
 
     /// The operator's stop: the base stands from the next step until [`Explorer::release`].
@@ -182,7 +231,9 @@ impl Explorer {
             ExploreState::Returning => self.home_m,
             _ => return standing(self.state),
         };
-        let step = self.controller.step(pose, &self.path, obstacles, dt_s);
+        let mut around = self.remembered(pose);
+        around.extend_from_slice(obstacles);
+        let step = self.controller.step(pose, &self.path, &around, dt_s);
         let distance = (goal[0] - pose.x_m).hypot(goal[1] - pose.y_m);
         if distance < self.best.0 - self.cfg.progress_m {
             self.best = (distance, now_s);

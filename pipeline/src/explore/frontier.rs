@@ -1,6 +1,6 @@
 //! Frontiers: where the known, traversable floor meets the unknown, grouped into clusters the
-//! robot can drive to. A frontier cell is traversable and has an unknown 4-neighbour; frontier
-//! cells touching (8-connected) are one frontier. Clusters smaller than `min_cells` (a gap
+//! robot can drive to. A frontier cell is traversable with unknown space a free cell or two
+//! away (4-connected; [`is_frontier`]); frontier cells touching (8-connected) are one frontier. Clusters smaller than `min_cells` (a gap
 //! between two returns, a cell behind a chair leg) are left out.
 
 use super::occupancy::{Cell, OccupancyGrid};
@@ -22,17 +22,52 @@ impl Frontier {
     }
 }
 
-/// Whether a cell is on a frontier.
-pub fn is_frontier(grid: &OccupancyGrid, (i, j): (usize, usize)) -> bool {
-    if !grid.traversable((i, j)) {
-        return false;
-    }
+/// How many steps (4-connected) through free cells unknown space may lie from a frontier cell.
+/// The edge of what the LiDAR saw is often a band of cells its rays crossed without a floor
+/// return landing in them (free, but not known as floor): far floor is hit sparsely, and the
+/// view's side edges graze it. Looking one cell past that band finds the unknown behind it;
+/// walls (occupied) and the free cells beside them are never looked through.
+pub const FRONTIER_REACH_CELLS: usize = 2;
+
+/// Whether a cell is on a frontier: traversable, with unknown space (not a hole in what is
+/// known) at most [`FRONTIER_REACH_CELLS`] steps away through free cells.
+pub fn is_frontier(grid: &OccupancyGrid, c: (usize, usize)) -> bool {
+    grid.traversable(c) && unknown_within(grid, c, FRONTIER_REACH_CELLS)
+}
+
+/// The 4-neighbours of a cell inside the grid.
+fn four(grid: &OccupancyGrid, (i, j): (usize, usize)) -> impl Iterator<Item = (usize, usize)> {
     let side = grid.side();
-    let unknown = |c: (usize, usize)| grid.cell(c) == Cell::Unknown;
-    (i > 0 && unknown((i - 1, j)))
-        || (i + 1 < side && unknown((i + 1, j)))
-        || (j > 0 && unknown((i, j - 1)))
-        || (j + 1 < side && unknown((i, j + 1)))
+    [
+        (i > 0).then(|| (i - 1, j)),
+        (i + 1 < side).then_some((i + 1, j)),
+        (j > 0).then(|| (i, j - 1)),
+        (j + 1 < side).then_some((i, j + 1)),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+/// Whether unknown space lies at most `steps` 4-connected steps from `c`, through free cells
+/// that touch nothing occupied (a free cell beside a wall may be a gap in it: a wall's returns
+/// split between two rows of cells).
+fn unknown_within(grid: &OccupancyGrid, c: (usize, usize), steps: usize) -> bool {
+    steps > 0
+        && four(grid, c).any(|n| match grid.cell(n) {
+            Cell::Unknown => open_unknown(grid, n),
+            Cell::Free => {
+                steps > 1
+                    && !grid.neighbours(n).any(|m| grid.cell(m) == Cell::Occupied)
+                    && unknown_within(grid, n, steps - 1)
+            }
+            Cell::Occupied => false,
+        })
+}
+
+/// Whether an unknown cell is part of unknown space, not a hole in what is known: at least two
+/// of its 4-neighbours are unknown too.
+fn open_unknown(grid: &OccupancyGrid, c: (usize, usize)) -> bool {
+    four(grid, c).filter(|&n| grid.cell(n) == Cell::Unknown).count() >= 2
 }
 
 /// Every frontier of at least `min_cells` cells, largest first.
