@@ -10,7 +10,7 @@ use starc_hil::rng::{hash2, SplitMix64};
 use starc_hil::sim::motion::RobotMotion;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
-use starc_pipeline::explore::{BodyTwist, Cell, ExploreConfig, ExploreState, Explorer, OccupancyGrid, Pose2};
+use starc_pipeline::explore::{Cell, ExploreConfig, ExploreState, Explorer, OccupancyGrid, Pose2};
 use std::time::Instant;
 
 /// Settings of a kinematic run.
@@ -104,11 +104,7 @@ fn touches(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> bool {
 /// What the controller avoids at `pose`: the scan's returns in the body band, and the grid's
 /// occupied cells within 1.5 m; body frame.
 fn obstacles(grid: &OccupancyGrid, points: &[Vector3<f64>], pose: &Pose2, body_m: (f64, f64)) -> Vec<[f64; 2]> {
-    let (s, c) = pose.yaw_rad.sin_cos();
-    let body = |x: f64, y: f64| {
-        let (dx, dy) = (x - pose.x_m, y - pose.y_m);
-        [c * dx + s * dy, -s * dx + c * dy]
-    };
+    let body = |x: f64, y: f64| pose.to_body([x, y]);
     let mut out: Vec<[f64; 2]> =
         points.iter().filter(|p| p.z > body_m.0 && p.z < body_m.1).map(|p| body(p.x, p.y)).collect();
     let cell_m = grid.config().cell_m;
@@ -129,15 +125,6 @@ fn obstacles(grid: &OccupancyGrid, points: &[Vector3<f64>], pose: &Pose2, body_m
         }
     }
     out
-}
-
-fn move_by(p: &Pose2, t: &BodyTwist, dt_s: f64) -> Pose2 {
-    let (s, c) = p.yaw_rad.sin_cos();
-    Pose2 {
-        x_m: p.x_m + (c * t.vx_m_s - s * t.vy_m_s) * dt_s,
-        y_m: p.y_m + (s * t.vx_m_s + c * t.vy_m_s) * dt_s,
-        yaw_rad: p.yaw_rad + t.wz_rad_s * dt_s,
-    }
 }
 
 /// Counts a period's contact into `run` (a new contact when the last period had none).
@@ -179,7 +166,7 @@ pub fn explore_kinematic(scenario: &Scenario, cfg: &KinematicConfig) -> Option<K
             run.done_s = Some(t_s);
             break;
         }
-        let next = move_by(&pose, &step.twist, dt_s);
+        let next = pose.after(&step.twist, dt_s);
         run.distance_m += (next.x_m - pose.x_m).hypot(next.y_m - pose.y_m);
         pose = next;
         note_contact(&mut run, touches(&world, &pose, cfg.explore.control.robot_radius_m, t_s), &mut was);

@@ -74,6 +74,26 @@ pub struct Pose2 {
     pub yaw_rad: f64,
 }
 
+impl Pose2 {
+    /// The pose after `twist` (body frame) held for `dt_s`, the heading turned at its end: one
+    /// control period of an omni base, to first order.
+    pub fn after(&self, twist: &BodyTwist, dt_s: f64) -> Pose2 {
+        let (s, c) = self.yaw_rad.sin_cos();
+        Pose2 {
+            x_m: self.x_m + (c * twist.vx_m_s - s * twist.vy_m_s) * dt_s,
+            y_m: self.y_m + (s * twist.vx_m_s + c * twist.vy_m_s) * dt_s,
+            yaw_rad: self.yaw_rad + twist.wz_rad_s * dt_s,
+        }
+    }
+
+    /// A world point (x, y) in the body frame at this pose.
+    pub fn to_body(&self, w: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.yaw_rad.sin_cos();
+        let (dx, dy) = (w[0] - self.x_m, w[1] - self.y_m);
+        [c * dx + s * dy, -s * dx + c * dy]
+    }
+}
+
 /// A body twist: forward, left (m/s), counter-clockwise (rad/s).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BodyTwist {

@@ -173,15 +173,11 @@ impl Explorer {
 
     /// The remembered returns within `MEMORY_RANGE_M` of `pose`, in its body frame.
     fn remembered(&self, pose: &Pose2) -> Vec<[f64; 2]> {
-        let (s, c) = pose.yaw_rad.sin_cos();
         self.memory
             .iter()
             .flatten()
             .filter(|w| (w[0] - pose.x_m).hypot(w[1] - pose.y_m) < MEMORY_RANGE_M)
-            .map(|w| {
-                let (dx, dy) = (w[0] - pose.x_m, w[1] - pose.y_m);
-                [c * dx + s * dy, -s * dx + c * dy]
-            })
+            .map(|w| pose.to_body(*w))
             .collect()
     }
 

@@ -6,25 +6,9 @@ use super::*;
 
 const DT_S: f64 = 0.05;
 
-/// The pose after `twist` (body frame) for `dt_s`.
-fn moved(p: &Pose2, t: &BodyTwist, dt_s: f64) -> Pose2 {
-    let (s, c) = p.yaw_rad.sin_cos();
-    Pose2 {
-        x_m: p.x_m + (c * t.vx_m_s - s * t.vy_m_s) * dt_s,
-        y_m: p.y_m + (s * t.vx_m_s + c * t.vy_m_s) * dt_s,
-        yaw_rad: p.yaw_rad + t.wz_rad_s * dt_s,
-    }
-}
-
 /// World points in the body frame at `p`.
 pub(super) fn in_body(p: &Pose2, world: impl Iterator<Item = [f64; 2]>) -> Vec<[f64; 2]> {
-    let (s, c) = p.yaw_rad.sin_cos();
-    world
-        .map(|w| {
-            let (dx, dy) = (w[0] - p.x_m, w[1] - p.y_m);
-            [c * dx + s * dy, -s * dx + c * dy]
-        })
-        .collect()
+    world.map(|w| p.to_body(w)).collect()
 }
 
 /// The world points the Avia sees from `p`: inside its 70.4 deg view, within 15 m; body frame.
@@ -62,7 +46,7 @@ pub(super) fn run_with(
         if step.state == ControlState::Arrived {
             break;
         }
-        pose = moved(&pose, &step.twist, DT_S);
+        pose = pose.after(&step.twist, DT_S);
     }
     out
 }

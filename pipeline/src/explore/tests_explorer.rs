@@ -67,15 +67,6 @@ fn scan(walls: &[Segment], p: &Pose2) -> (Vec<Vector3<f64>>, Vec<[f64; 2]>) {
     (points, seen)
 }
 
-fn moved(p: &Pose2, t: &BodyTwist) -> Pose2 {
-    let (s, c) = p.yaw_rad.sin_cos();
-    Pose2 {
-        x_m: p.x_m + (c * t.vx_m_s - s * t.vy_m_s) * DT_S,
-        y_m: p.y_m + (s * t.vx_m_s + c * t.vy_m_s) * DT_S,
-        yaw_rad: p.yaw_rad + t.wz_rad_s * DT_S,
-    }
-}
-
 /// The distance from `p` to the nearest wall.
 fn to_wall(walls: &[Segment], p: &Pose2) -> f64 {
     walls
@@ -127,7 +118,7 @@ fn explore(start: Pose2, extra: &[[f64; 2]], max_s: f64) -> Run {
         if step.state == ExploreState::Done {
             break;
         }
-        pose = moved(&pose, &step.twist);
+        pose = pose.after(&step.twist, DT_S);
     }
     Run { steps, explorer }
 }
