@@ -1,6 +1,6 @@
 //! Exploration on a generated building, kinematic: the base moves exactly as the explorer
-//! commands, at its true pose, and an idealised Avia (rays on a fixed grid over its 70 x 77 deg
-//! view, cast into the simulator's world, people included) scans it. This measures the
+//! commands, at its true pose, and an idealised Avia (rays in random directions over its
+//! 70 x 77 deg view, cast into the simulator's world, people included) scans it. This measures the
 //! explorer's policy (where it goes, how much floor it comes to know, whether it touches
 //! anything) against the scenario's scripted route scanned the same way; it is not the closed
 //! loop over the mock devices with the LIO's poses (`starc sim --explore`, not built yet).
@@ -10,7 +10,7 @@ use starc_hil::rng::{hash2, SplitMix64};
 use starc_hil::sim::motion::RobotMotion;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
-use starc_pipeline::explore::{Cell, ExploreConfig, ExploreState, Explorer, OccupancyGrid, Pose2};
+use starc_pipeline::explore::{ExploreConfig, ExploreState, Explorer, OccupancyGrid, Pose2};
 use std::time::Instant;
 
 /// Settings of a kinematic run.
@@ -101,32 +101,6 @@ fn touches(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> bool {
     })
 }
 
-/// What the controller avoids at `pose`: the scan's returns in the body band, and the grid's
-/// occupied cells within 1.5 m; body frame.
-fn obstacles(grid: &OccupancyGrid, points: &[Vector3<f64>], pose: &Pose2, body_m: (f64, f64)) -> Vec<[f64; 2]> {
-    let body = |x: f64, y: f64| pose.to_body([x, y]);
-    let mut out: Vec<[f64; 2]> =
-        points.iter().filter(|p| p.z > body_m.0 && p.z < body_m.1).map(|p| body(p.x, p.y)).collect();
-    let cell_m = grid.config().cell_m;
-    let r = (1.5 / cell_m).ceil() as i64;
-    if let Some((ci, cj)) = grid.cell_of(pose.x_m, pose.y_m) {
-        for dj in -r..=r {
-            for di in -r..=r {
-                let (i, j) = (ci as i64 + di, cj as i64 + dj);
-                if i < 0 || j < 0 {
-                    continue;
-                }
-                let cell = (i as usize, j as usize);
-                if grid.cell(cell) == Cell::Occupied {
-                    let [x, y] = grid.centre_of(cell);
-                    out.push(body(x, y));
-                }
-            }
-        }
-    }
-    out
-}
-
 /// Counts a period's contact into `run` (a new contact when the last period had none).
 fn note_contact(run: &mut KinematicRun, touching: bool, was: &mut bool) {
     if touching {
@@ -146,21 +120,18 @@ pub fn explore_kinematic(scenario: &Scenario, cfg: &KinematicConfig) -> Option<K
     let mut explorer = Explorer::new(cfg.explore, [start[0], start[1]])?;
     let mut pose = Pose2 { x_m: start[0], y_m: start[1], yaw_rad: start[2].to_radians() };
     let (dt_s, scan_every) = (1.0 / cfg.control_hz, (cfg.control_hz / cfg.scan_hz).round().max(1.0) as usize);
-    let occ = cfg.explore.occupancy;
-    let band = (occ.floor_z_m + occ.max_step_m, occ.floor_z_m + occ.body_height_m);
     let mut run = KinematicRun::default();
-    let (mut points, mut was, mut next_s) = (Vec::new(), false, 0.0);
+    let (mut was, mut next_s) = (false, 0.0);
     for k in 0..(cfg.duration_s * cfg.control_hz) as usize {
         let t_s = k as f64 * dt_s;
         if k % scan_every == 0 {
             let (origin, pts) = scan(&world, cfg, robot.lidar_height_m, &pose, t_s, k as u64);
             explorer.add_scan(&origin, &pts);
-            points = pts;
         }
         sample(&mut run, explorer.grid(), t_s, cfg.sample_s, &mut next_s);
-        let seen = obstacles(explorer.grid(), &points, &pose, band);
+        // The explorer's own memory of the placed scans and its grid are all the controller gets.
         let t0 = Instant::now();
-        let step = explorer.step(t_s, &pose, &seen, dt_s);
+        let step = explorer.step(t_s, &pose, &[], dt_s);
         run.step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
         if step.state == ExploreState::Done {
             run.done_s = Some(t_s);

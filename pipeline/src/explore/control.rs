@@ -39,9 +39,9 @@ pub struct ControlConfig {
     pub view_half_deg: f64,
     /// Turn rate per radian of heading error (1/s).
     pub heading_gain: f64,
-    /// Where the way is slowed or blocked close by, directions up to this far off it (deg) are
-    /// tried, and the one making the most speed along the way is taken: a doorway's post passed
-    /// close. Going round what stands on the path is the planner's: the base stops
+    /// Directions up to this far off the way (deg) are tried, and the one making the most speed
+    /// along the way is taken: a doorway's post passed close, or a way at the view's edge
+    /// travelled nearer its middle. Going round what stands on the path is the planner's: the base stops
     /// ([`ControlState::Blocked`]) and the caller plans again with it in the grid. 0: only the
     /// way itself.
     pub swerve_deg: f64,
@@ -165,16 +165,14 @@ impl LocalController {
         if (end[0] - pose.x_m).hypot(end[1] - pose.y_m) <= self.cfg.goal_tolerance_m {
             return self.stand(ControlState::Arrived);
         }
-        let target = lookahead(path, [pose.x_m, pose.y_m], self.cfg.lookahead_m);
-        let (sin, cos) = pose.yaw_rad.sin_cos();
-        let (dx, dy) = (target[0] - pose.x_m, target[1] - pose.y_m);
         // The way to go, in the body frame.
-        let way = [cos * dx + sin * dy, -sin * dx + cos * dy];
+        let way = pose.to_body(lookahead(path, [pose.x_m, pose.y_m], self.cfg.lookahead_m));
         let bearing = way[1].atan2(way[0]);
         let distance = way[0].hypot(way[1]);
         let wanted_turn = (self.cfg.heading_gain * bearing).clamp(-self.cfg.max_turn_rad_s, self.cfg.max_turn_rad_s);
-        // Stop at the goal, and short of anything on the way; where the way itself is blocked,
-        // a direction up to `swerve_deg` off it that makes more progress is taken instead.
+        // Stop at the goal, and short of anything on the way; where something close or the view
+        // slows the way, a direction up to `swerve_deg` off it that makes more progress is taken
+        // (towards the view's middle, or past a post).
         let arrive = (2.0 * self.cfg.max_accel_m_s2 * distance).sqrt();
         let straight = self.heading_for(bearing, bearing, arrive, obstacles);
         let best = swerves(self.cfg.swerve_deg)

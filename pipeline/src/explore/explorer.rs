@@ -15,8 +15,8 @@ use std::f64::consts::TAU;
 
 /// The remembered returns are kept one per cell of this size (m).
 const MEMORY_CELL_M: f64 = 0.05;
-/// Only remembered returns this near the base reach the controller (m).
-const MEMORY_RANGE_M: f64 = 1.5;
+/// Remembered returns and the grid's occupied cells this near the base reach the controller (m).
+const NEAR_M: f64 = 1.5;
 
 /// Settings of the loop.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -171,14 +171,13 @@ impl Explorer {
         }
     }
 
-    /// The remembered returns within `MEMORY_RANGE_M` of `pose`, in its body frame.
-    fn remembered(&self, pose: &Pose2) -> Vec<[f64; 2]> {
-        self.memory
-            .iter()
-            .flatten()
-            .filter(|w| (w[0] - pose.x_m).hypot(w[1] - pose.y_m) < MEMORY_RANGE_M)
-            .map(|w| pose.to_body(*w))
-            .collect()
+    /// What the controller avoids besides the caller's obstacles, within `NEAR_M` of `pose`
+    /// and in its body frame: the remembered returns, and the grid's occupied cells (the Avia
+    /// does not see beside the base, as in a doorway).
+    fn around(&self, pose: &Pose2) -> Vec<[f64; 2]> {
+        let remembered = self.memory.iter().flatten().filter(|w| (w[0] - pose.x_m).hypot(w[1] - pose.y_m) < NEAR_M);
+        let occupied = self.grid.occupied_near(pose.x_m, pose.y_m, NEAR_M);
+        remembered.chain(occupied.iter()).map(|w| pose.to_body(*w)).collect()
     }
 
     /// The operator's stop: the base stands from the next step until [`Explorer::release`].
@@ -192,8 +191,9 @@ impl Explorer {
         self.planned_at_s = f64::NEG_INFINITY;
     }
 
-    /// One control period at `now_s`: the twist for the base at `pose`, with `obstacles` as
-    /// [`LocalController::step`] takes them.
+    /// One control period at `now_s`: the twist for the base at `pose`. `obstacles` (body x,
+    /// y) are what the caller knows beyond the placed scans (someone seen in a scan not placed
+    /// yet); the explorer adds its memory and the grid's occupied cells around the base.
     pub fn step(&mut self, now_s: f64, pose: &Pose2, obstacles: &[[f64; 2]], dt_s: f64) -> ExploreStep {
         let turned = self.turned_since_last(pose.yaw_rad);
         if pose.x_m.is_finite() && pose.y_m.is_finite() {
@@ -210,7 +210,7 @@ impl Explorer {
                     let twist = BodyTwist { wz_rad_s: self.cfg.control.max_turn_rad_s, ..BodyTwist::ZERO };
                     return ExploreStep { twist, state: self.state, control: None };
                 }
-                self.plan(now_s, pose);
+                self.state = self.next_state(now_s, pose);
             }
             ExploreState::Going { .. } | ExploreState::Returning if now_s - self.planned_at_s >= self.cfg.replan_s => {
                 self.replan(now_s, pose);
@@ -227,7 +227,7 @@ impl Explorer {
             ExploreState::Returning => self.home_m,
             _ => return standing(self.state),
         };
-        let mut around = self.remembered(pose);
+        let mut around = self.around(pose);
         around.extend_from_slice(obstacles);
         let step = self.controller.step(pose, &self.path, &around, dt_s);
         let distance = (goal[0] - pose.x_m).hypot(goal[1] - pose.y_m);
@@ -236,8 +236,11 @@ impl Explorer {
         }
         match (step.state, self.state) {
             (ControlState::Arrived, ExploreState::Going { .. }) => {
-                self.state =
-                    if self.cfg.sweep { ExploreState::Sweeping { turned_rad: 0.0 } } else { self.after(now_s, pose) };
+                self.state = if self.cfg.sweep {
+                    ExploreState::Sweeping { turned_rad: 0.0 }
+                } else {
+                    self.next_state(now_s, pose)
+                };
             }
             (ControlState::Arrived, _) => self.state = ExploreState::Done,
             (ControlState::Idle, _) => self.replan(now_s, pose),
@@ -262,23 +265,17 @@ impl Explorer {
                 return;
             }
         }
-        self.plan(now_s, pose);
+        self.state = self.next_state(now_s, pose);
     }
 
-    /// Chooses the next goal and the way there.
-    fn plan(&mut self, now_s: f64, pose: &Pose2) {
-        self.state = self.after(now_s, pose);
-    }
-
-    /// Where to go from `pose`: the best frontier, else home, else nowhere.
-    fn after(&mut self, now_s: f64, pose: &Pose2) -> ExploreState {
+    /// Where to go from `pose`, its way planned: the best frontier, else home, else nowhere.
+    fn next_state(&mut self, now_s: f64, pose: &Pose2) -> ExploreState {
         self.planned_at_s = now_s;
         self.best = (f64::INFINITY, now_s);
-        let Some(robot) = self.grid.cell_of(pose.x_m, pose.y_m) else { return self.nowhere() };
-        let costs = Costs::from(&self.grid, &usable(&self.grid, robot, self.cfg.plan.robot_radius_m), robot);
+        let Some(costs) = self.costs_from(pose) else { return self.nowhere() };
         let found = frontiers(&self.grid, self.cfg.min_frontier_cells);
         if let Some(choice) = choose_goal(&self.grid, &found, &costs, &self.blacklist, &self.cfg.plan) {
-            self.path = costs.path_to(choice.goal).into_iter().map(|c| self.grid.centre_of(c)).collect();
+            self.path = self.world_path(&costs, choice.goal);
             return ExploreState::Going { goal_m: self.grid.centre_of(choice.goal) };
         }
         let home = self.home_m;
@@ -296,17 +293,26 @@ impl Explorer {
 
     /// Plans the way from `pose` to `goal`; false when it cannot be reached.
     fn way_to(&mut self, pose: &Pose2, goal: [f64; 2]) -> bool {
-        let (Some(robot), Some(target)) = (self.grid.cell_of(pose.x_m, pose.y_m), self.grid.cell_of(goal[0], goal[1]))
-        else {
+        let (Some(costs), Some(target)) = (self.costs_from(pose), self.grid.cell_of(goal[0], goal[1])) else {
             return false;
         };
-        let costs = Costs::from(&self.grid, &usable(&self.grid, robot, self.cfg.plan.robot_radius_m), robot);
-        let path = costs.path_to(target);
+        let path = self.world_path(&costs, target);
         if path.is_empty() {
             return false;
         }
-        self.path = path.into_iter().map(|c| self.grid.centre_of(c)).collect();
+        self.path = path;
         true
+    }
+
+    /// Travel costs over the usable floor from `pose` (None off the grid).
+    fn costs_from(&self, pose: &Pose2) -> Option<Costs> {
+        let robot = self.grid.cell_of(pose.x_m, pose.y_m)?;
+        Some(Costs::from(&self.grid, &usable(&self.grid, robot, self.cfg.plan.robot_radius_m), robot))
+    }
+
+    /// The cheapest way to `goal` as cell centres (world x, y); empty when it was not reached.
+    fn world_path(&self, costs: &Costs, goal: (usize, usize)) -> Vec<[f64; 2]> {
+        costs.path_to(goal).into_iter().map(|c| self.grid.centre_of(c)).collect()
     }
 
     /// How far the base has turned since the last step (rad, unsigned).

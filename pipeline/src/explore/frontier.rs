@@ -1,7 +1,8 @@
 //! Frontiers: where the known, traversable floor meets the unknown, grouped into clusters the
 //! robot can drive to. A frontier cell is traversable with unknown space a free cell or two
-//! away (4-connected; [`is_frontier`]); frontier cells touching (8-connected) are one frontier. Clusters smaller than `min_cells` (a gap
-//! between two returns, a cell behind a chair leg) are left out.
+//! away (4-connected; [`is_frontier`]); frontier cells touching (8-connected) are one frontier.
+//! Clusters smaller than `min_cells` (a gap between two returns, a cell behind a chair leg) are
+//! left out.
 
 use super::occupancy::{Cell, OccupancyGrid};
 use std::collections::VecDeque;

@@ -163,6 +163,27 @@ impl OccupancyGrid {
         }
     }
 
+    /// The centres (world x, y) of the occupied cells within `radius_m` of (x, y).
+    pub fn occupied_near(&self, x: f64, y: f64, radius_m: f64) -> Vec<[f64; 2]> {
+        let Some((ci, cj)) = self.cell_of(x, y) else { return Vec::new() };
+        let r = (radius_m.max(0.0) / self.cfg.cell_m).ceil().min(self.side as f64) as i64;
+        let mut out = Vec::new();
+        for dj in -r..=r {
+            for di in -r..=r {
+                let (i, j) = (ci as i64 + di, cj as i64 + dj);
+                if i < 0 || j < 0 {
+                    continue;
+                }
+                let c = (i as usize, j as usize);
+                let [cx, cy] = self.centre_of(c);
+                if self.cell(c) == Cell::Occupied && (cx - x).hypot(cy - y) <= radius_m {
+                    out.push([cx, cy]);
+                }
+            }
+        }
+        out
+    }
+
     /// Adds one placed scan: the sensor at `origin` (world), its returns in the world. Cells an
     /// obstacle return falls in are not cleared by the same scan's rays or floor returns (the
     /// floor at a wall's foot shares its cell).

@@ -235,16 +235,9 @@ fn the_controller_drives_the_planned_way_through_the_doorway_without_touching_a_
     // The controller's obstacles: the walls as the live scan sees them, and the grid's occupied
     // cells within 1.5 m (the door's posts, beside the base as it passes, out of the view).
     let walls: Vec<[f64; 2]> = room_scan().iter().filter(|p| p.z > 0.5).map(|p| [p.x, p.y]).collect();
-    let side = g.side();
-    let occupied: Vec<[f64; 2]> = (0..side * side)
-        .map(|k| (k % side, k / side))
-        .filter(|&c| g.cell(c) == Cell::Occupied)
-        .map(|c| g.centre_of(c))
-        .collect();
     let obstacles = |p: &Pose2| {
-        let near = occupied.iter().filter(|o| (o[0] - p.x_m).hypot(o[1] - p.y_m) < 1.5).copied();
         let mut seen = super::tests_control::seen(p, &walls);
-        seen.extend(super::tests_control::in_body(p, near));
+        seen.extend(super::tests_control::in_body(p, g.occupied_near(p.x_m, p.y_m, 1.5).into_iter()));
         seen
     };
     let start = Pose2 { x_m: 1.0, y_m: 2.0, yaw_rad: 0.0 };

@@ -94,25 +94,14 @@ fn explore(start: Pose2, extra: &[[f64; 2]], max_s: f64) -> Run {
     };
     let mut explorer = Explorer::new(cfg, [start.x_m, start.y_m]).unwrap();
     let mut pose = start;
-    let mut live = Vec::new();
     let mut steps = Vec::new();
     for k in 0..(max_s / DT_S) as usize {
         if k % SCAN_EVERY == 0 {
             let (points, _) = scan(&walls, &pose);
             explorer.add_scan(&Vector3::new(pose.x_m, pose.y_m, 0.5), &points);
-            // The wall returns, kept in the world: the base moves and turns between scans.
-            live = points.iter().filter(|p| p.z > 0.5).map(|p| [p.x, p.y]).collect::<Vec<_>>();
         }
-        // The controller's obstacles: the live walls, who stands there, and the grid's
-        // occupied cells within 1.5 m.
-        let g = explorer.grid();
-        let side = g.side();
-        let near = (0..side * side)
-            .map(|c| (c % side, c / side))
-            .filter(|&c| g.cell(c) == Cell::Occupied)
-            .map(|c| g.centre_of(c))
-            .filter(|o| (o[0] - pose.x_m).hypot(o[1] - pose.y_m) < 1.5);
-        let obstacles = in_body(&pose, live.iter().copied().chain(near).chain(extra.iter().copied()));
+        // The explorer keeps the walls it saw and its grid; the caller adds who stands there.
+        let obstacles = in_body(&pose, extra.iter().copied());
         let step = explorer.step(k as f64 * DT_S, &pose, &obstacles, DT_S);
         steps.push((pose, step));
         if step.state == ExploreState::Done {
