@@ -34,6 +34,9 @@ pub enum HilError {
     /// Writing a simulator output failed.
     #[error("writing {path}: {reason}")]
     Output { path: PathBuf, reason: String },
+    /// What drives the simulated robot in a closed loop failed.
+    #[error("robot driver: {0}")]
+    Driver(String),
     /// The mock's task ended abnormally (panicked or was cancelled).
     #[error("mock task: {0}")]
     Task(String),

@@ -68,7 +68,7 @@ impl MockC620 {
         }
     }
 
-    /// Output-shaft speeds in rad/s (for tests).
+    /// Output-shaft speeds in rad/s.
     pub fn speeds(&self) -> Vec<(u8, f64)> {
         self.escs.iter().map(|e| (e.id, e.speed.value)).collect()
     }

@@ -184,6 +184,16 @@ impl MotorsDevice {
     pub fn is_open(&self) -> bool {
         self.adapter.is_open()
     }
+
+    /// Each controller's id and its motor's true speed: output-shaft rad/s for the C620s
+    /// (after the gearbox), drive units for CiA 402 (as its `0x606C` reports them). For the
+    /// simulator, which moves the base as the motors really turn.
+    pub fn true_speeds(&self) -> Vec<(u8, f64)> {
+        match &self.controllers {
+            Controllers::C620(c) => c.speeds(),
+            Controllers::Cia402(drives) => drives.iter().map(|d| (d.node(), d.velocity())).collect(),
+        }
+    }
 }
 
 #[cfg(test)]

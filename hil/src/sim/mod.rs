@@ -11,6 +11,7 @@ pub mod bvh;
 pub mod camera;
 pub mod clutter;
 pub mod devices;
+pub mod driven;
 pub mod fixtures;
 pub mod furniture;
 pub mod human;

@@ -6,6 +6,7 @@
 //! gait terms are sinusoids of the distance walked scaled by the speed. The IMUs differentiate
 //! these functions, so what they measure is exactly the motion the LiDARs see.
 
+use crate::sim::driven::DrivenTrack;
 use crate::sim::scenario::{Mount, Person, Responder, Robot};
 use crate::sim::shapes::V3;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
@@ -155,6 +156,8 @@ pub trait Motion: Send + Sync {
 #[derive(Clone, Debug)]
 pub struct RobotMotion {
     route: Route,
+    /// Driven in a closed loop instead of along `route` (which is then empty).
+    driven: Option<DrivenTrack>,
     lidar_height_m: f64,
     lidar_pitch_rad: f64,
 }
@@ -170,16 +173,35 @@ impl RobotMotion {
             r.max_yaw_rate_deg_s.to_radians(),
             r.pause_s,
         );
-        Self { route, lidar_height_m: r.lidar_height_m, lidar_pitch_rad: r.lidar_pitch_deg.to_radians() }
+        Self { route, driven: None, lidar_height_m: r.lidar_height_m, lidar_pitch_rad: r.lidar_pitch_deg.to_radians() }
     }
 
+    /// The robot `r` (its mast), moved along `track` instead of its waypoints.
+    pub fn driven(r: &Robot, track: DrivenTrack) -> Self {
+        Self {
+            route: Route::default(),
+            driven: Some(track),
+            lidar_height_m: r.lidar_height_m,
+            lidar_pitch_rad: r.lidar_pitch_deg.to_radians(),
+        }
+    }
+
+    /// Where the base is at `t`, scripted or driven.
+    pub fn state_at(&self, t: f64) -> RouteState {
+        match &self.driven {
+            Some(track) => track.at(t),
+            None => self.route.at(t),
+        }
+    }
+
+    /// The scripted route (empty for a driven robot).
     pub fn route(&self) -> &Route {
         &self.route
     }
 
     /// The base's pose on the floor.
     pub fn base_pose(&self, t: f64) -> Isometry3<f64> {
-        let s = self.route.at(t);
+        let s = self.state_at(t);
         pose_xyz_rpy(V3::new(s.x, s.y, 0.0), 0.0, 0.0, s.yaw_rad)
     }
 }

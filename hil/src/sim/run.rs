@@ -9,6 +9,7 @@ use crate::error::{HilError, Result};
 use crate::rng::hash2;
 use crate::sim::camera::{write_png, PinholeCamera};
 use crate::sim::devices::{ExternalImu, WheelCan};
+use crate::sim::driven::DrivenTrack;
 use crate::sim::imu::ImuSim;
 use crate::sim::lan::{AviaLink, LinkStats, Wire};
 use crate::sim::lidar::{avia_lidar_imu, AviaSim, LabelSink, LABEL_EMPTY};
@@ -228,9 +229,38 @@ impl DeviceRun {
     }
 }
 
+/// What a link's traffic goes to: the pcap, and the robot's driver when there is one.
+fn tap<'a, 'd: 'a>(
+    pcap: &'a mut PcapWriter<BufWriter<File>>,
+    pcap_path: &'a Path,
+    mut driver: Option<&'a mut (dyn RobotDriver + 'd)>,
+) -> impl FnMut(Wire<'_>) -> Result<()> + use<'a, 'd> {
+    move |w: Wire<'_>| {
+        pcap.write_udp(ptp_ns(w.time_ns), w.src, w.dst, w.payload).map_err(|e| out_err(pcap_path, e))?;
+        match driver.as_deref_mut() {
+            Some(d) => d.on_wire(&w),
+            None => Ok(()),
+        }
+    }
+}
+
 /// PTP time of simulator time `t_ns` (see the module docs).
 fn ptp_ns(t_ns: u64) -> u64 {
     t_ns.saturating_add_signed(AviaLink::ptp_offset_ns())
+}
+
+/// What drives the robot in a closed loop instead of its waypoints (`starc sim --explore`).
+/// It sees the robot's Avia traffic as its host receives it, and keeps the robot's track
+/// ([`DrivenTrack`]) a few milliseconds ahead of the simulator's clock, so that the devices
+/// reading it (the LiDAR, both IMUs, the wheels) always find it known.
+pub trait RobotDriver {
+    /// The track the robot moves along; the simulator reads it, the driver appends to it.
+    fn track(&self) -> DrivenTrack;
+    /// One datagram on the robot's Avia network (both ways), at simulator time `w.time_ns`.
+    fn on_wire(&mut self, w: &Wire<'_>) -> Result<()>;
+    /// Before the step at simulator time `t_ns`, when the steps before it have been seen: the
+    /// track must then reach past `t_ns + 2 ms` (the IMUs' differences look 1 ms ahead).
+    fn before_step(&mut self, t_ns: u64) -> Result<()>;
 }
 
 /// Runs a scenario. `progress` is called about ten times per simulated second with
@@ -241,6 +271,18 @@ pub fn run(
     opts: &SimOptions,
     progress: &mut dyn FnMut(f64, f64),
 ) -> Result<SimSummary> {
+    run_driven(scenario, scenario_text, opts, None, progress)
+}
+
+/// [`run`], with the robot driven by `driver` when one is given (its waypoints past the first
+/// are then ignored).
+pub fn run_driven<'d>(
+    scenario: &Scenario,
+    scenario_text: &str,
+    opts: &SimOptions,
+    mut driver: Option<&mut (dyn RobotDriver + 'd)>,
+    progress: &mut dyn FnMut(f64, f64),
+) -> Result<SimSummary> {
     let duration_s = opts.duration_s.unwrap_or(scenario.duration_s);
     if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= 86_400.0) {
         return Err(HilError::config("duration_s", format!("must be in (0, 86400], not {duration_s}")));
@@ -248,12 +290,16 @@ pub fn run(
     let out = &opts.out;
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
     std::fs::write(out.join("scenario.toml"), scenario_text).map_err(|e| out_err(&out.join("scenario.toml"), e))?;
-    let mut sim = Sim::new(scenario, opts)?;
+    let track = driver.as_ref().map(|d| d.track());
+    let mut sim = Sim::new(scenario, opts, track)?;
     let end_ns = secs_ns(duration_s);
     let wall_start = Instant::now();
     let mut t = 0u64;
     while t <= end_ns {
-        sim.step(t, &mut |ts| progress(ts, duration_s))?;
+        if let Some(d) = driver.as_deref_mut() {
+            d.before_step(t)?;
+        }
+        sim.step(t, driver.as_deref_mut(), &mut |ts| progress(ts, duration_s))?;
         if opts.realtime && t.is_multiple_of(10_000_000) {
             let due = Duration::from_nanos(t);
             if let Some(wait) = due.checked_sub(wall_start.elapsed()) {
@@ -287,10 +333,13 @@ struct Sim {
 
 impl Sim {
     /// Builds the world and the devices and creates every output file in `opts.out`.
-    fn new(scenario: &Scenario, opts: &SimOptions) -> Result<Self> {
+    fn new(scenario: &Scenario, opts: &SimOptions, track: Option<DrivenTrack>) -> Result<Self> {
         let out = &opts.out;
         let world = Arc::new(World::new(scenario));
-        let robot_motion = Arc::new(RobotMotion::new(scenario.robot.get_ref()));
+        let robot_motion = Arc::new(match track {
+            Some(track) => RobotMotion::driven(scenario.robot.get_ref(), track),
+            None => RobotMotion::new(scenario.robot.get_ref()),
+        });
         let rig_motion = Arc::new(ResponderMotion::new(scenario.responder.get_ref()));
         let specs: [DeviceSpec; 2] = [
             ("robot", robot_motion.clone(), scenario.robot.get_ref().start_s, ROBOT_AVIA_IP, ROBOT_HOST_IP, ROBOT_CODE),
@@ -323,8 +372,13 @@ impl Sim {
 
     /// One network step at simulator time `t`: the links' traffic into the pcap, then every
     /// truth file, sensor and camera frame due at `t`. `progress` gets the simulated seconds.
-    fn step(&mut self, t: u64, progress: &mut dyn FnMut(f64)) -> Result<()> {
-        self.step_links(t)?;
+    fn step<'d>(
+        &mut self,
+        t: u64,
+        driver: Option<&mut (dyn RobotDriver + 'd)>,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<()> {
+        self.step_links(t, driver)?;
         if t.is_multiple_of(1_000_000_000 / TRUTH_HZ) {
             for d in &mut self.devices {
                 if t >= d.power_on_ns {
@@ -346,12 +400,13 @@ impl Sim {
         self.camera.step(&self.world, &self.rig_motion, t)
     }
 
-    /// Steps every device's link to `t`, their packets into the pcap.
-    fn step_links(&mut self, t: u64) -> Result<()> {
+    /// Steps every device's link to `t`, their packets into the pcap (and the robot's to its
+    /// driver).
+    fn step_links<'d>(&mut self, t: u64, mut driver: Option<&mut (dyn RobotDriver + 'd)>) -> Result<()> {
         let (pcap, pcap_path) = (&mut self.pcap, &self.pcap_path);
-        let mut tap =
-            |w: Wire<'_>| pcap.write_udp(ptp_ns(w.time_ns), w.src, w.dst, w.payload).map_err(|e| out_err(pcap_path, e));
         for d in &mut self.devices {
+            let to_driver = if d.name == "robot" { driver.as_deref_mut() } else { None };
+            let mut tap = tap(pcap, pcap_path, to_driver);
             d.link.step(t, &mut tap)?;
         }
         Ok(())

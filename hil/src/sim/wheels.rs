@@ -60,8 +60,8 @@ impl WheelOdometry {
     /// The reading at `t` (s); calls in time order.
     pub fn sample(&mut self, motion: &RobotMotion, t: f64) -> WheelReading {
         let h = 1e-3;
-        let (a, b) = (motion.route().at(t - h), motion.route().at(t + h));
-        let now = motion.route().at(t);
+        let (a, b) = (motion.state_at(t - h), motion.state_at(t + h));
+        let now = motion.state_at(t);
         let (vxw, vyw) = ((b.x - a.x) / (2.0 * h), (b.y - a.y) / (2.0 * h));
         let wz = (b.yaw_rad - a.yaw_rad) / (2.0 * h);
         let (s, c) = now.yaw_rad.sin_cos();
