@@ -8,7 +8,7 @@
 use super::control::{BodyTwist, ControlConfig, ControlState, LocalController, Pose2};
 use super::frontier::{frontiers, is_frontier};
 use super::occupancy::{OccupancyConfig, OccupancyGrid};
-use super::plan::{choose_goal, usable, Costs, PlanConfig};
+use super::plan::{choose_goal, usable, viewpoint, Costs, PlanConfig};
 use nalgebra::Vector3;
 use std::collections::VecDeque;
 use std::f64::consts::TAU;
@@ -17,6 +17,9 @@ use std::f64::consts::TAU;
 const MEMORY_CELL_M: f64 = 0.05;
 /// Remembered returns and the grid's occupied cells this near the base reach the controller (m).
 const NEAR_M: f64 = 1.5;
+
+/// A viewpoint this near where the base last swept shows nothing the sweep did not (m).
+const SAME_PLACE_M: f64 = 0.5;
 
 /// Settings of the loop.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,6 +41,15 @@ pub struct ExploreConfig {
     /// The body-band returns of this many of the latest scans are kept and handed to the
     /// controller with the caller's obstacles (0: none).
     pub memory_scans: usize,
+    /// A frontier is looked at from between these distances (m), not driven onto: a real
+    /// LiDAR sees nothing nearer than its minimum range, so unknown space right beside the
+    /// base stays unknown however long it stands there. (0, 0): driven onto, as an ideal
+    /// sensor allows.
+    pub view_from_m: (f64, f64),
+    /// Where the base starts, the floor within this that nothing was seen in is taken as free
+    /// floor once the first sweep is done ([`OccupancyGrid::assume_blind_floor`]): the ring a
+    /// real LiDAR cannot see around itself (0: none).
+    pub blind_radius_m: f64,
 }
 
 impl Default for ExploreConfig {
@@ -54,6 +66,8 @@ impl Default for ExploreConfig {
             return_home: true,
             // 4 s at the Avia's 5 Hz of placed scans in the tests and `starc explore`.
             memory_scans: 20,
+            blind_radius_m: 0.0,
+            view_from_m: (0.0, 0.0),
         }
     }
 }
@@ -98,6 +112,10 @@ pub struct Explorer {
     last_yaw: Option<f64>,
     /// The latest scans' body-band returns (world x, y).
     memory: VecDeque<Vec<[f64; 2]>>,
+    /// The first sweep is done (the start's blind floor assumed).
+    swept_home: bool,
+    /// Where the last sweep was made.
+    swept_at: Option<[f64; 2]>,
 }
 
 impl Explorer {
@@ -120,11 +138,18 @@ impl Explorer {
             best: (f64::INFINITY, 0.0),
             last_yaw: None,
             memory: VecDeque::new(),
+            swept_home: false,
+            swept_at: None,
         })
     }
 
     pub fn grid(&self) -> &OccupancyGrid {
         &self.grid
+    }
+
+    /// Where the base started (world x, y): where it comes back to.
+    pub fn home(&self) -> [f64; 2] {
+        self.home_m
     }
 
     pub fn state(&self) -> ExploreState {
@@ -210,6 +235,11 @@ impl Explorer {
                     let twist = BodyTwist { wz_rad_s: self.cfg.control.max_turn_rad_s, ..BodyTwist::ZERO };
                     return ExploreStep { twist, state: self.state, control: None };
                 }
+                if !self.swept_home && self.cfg.blind_radius_m > 0.0 {
+                    self.grid.assume_blind_floor(self.home_m[0], self.home_m[1], self.cfg.blind_radius_m);
+                }
+                self.swept_home = true;
+                self.swept_at = Some([pose.x_m, pose.y_m]);
                 self.state = self.next_state(now_s, pose);
             }
             ExploreState::Going { .. } | ExploreState::Returning if now_s - self.planned_at_s >= self.cfg.replan_s => {
@@ -230,7 +260,9 @@ impl Explorer {
         let mut around = self.around(pose);
         around.extend_from_slice(obstacles);
         let step = self.controller.step(pose, &self.path, &around, dt_s);
-        let distance = (goal[0] - pose.x_m).hypot(goal[1] - pose.y_m);
+        // Progress towards where the way ends (a frontier's viewpoint may lie away from it).
+        let aim = self.path.last().copied().unwrap_or(goal);
+        let distance = (aim[0] - pose.x_m).hypot(aim[1] - pose.y_m);
         if distance < self.best.0 - self.cfg.progress_m {
             self.best = (distance, now_s);
         }
@@ -260,7 +292,7 @@ impl Explorer {
         if let ExploreState::Going { goal_m } = self.state {
             let still = self.grid.cell_of(goal_m[0], goal_m[1]).is_some_and(|c| is_frontier(&self.grid, c))
                 && !self.blacklist.contains(&goal_m);
-            if still && self.way_to(pose, goal_m) {
+            if still && self.way_to_view(pose, goal_m) {
                 self.planned_at_s = now_s;
                 return;
             }
@@ -268,15 +300,20 @@ impl Explorer {
         self.state = self.next_state(now_s, pose);
     }
 
-    /// Where to go from `pose`, its way planned: the best frontier, else home, else nowhere.
+    /// Where to go from `pose`, its way planned: the best frontier, else home, else nowhere. A
+    /// frontier there is no way to look at, or only from where the base has just swept, is
+    /// blacklisted and the next one tried.
     fn next_state(&mut self, now_s: f64, pose: &Pose2) -> ExploreState {
         self.planned_at_s = now_s;
         self.best = (f64::INFINITY, now_s);
         let Some(costs) = self.costs_from(pose) else { return self.nowhere() };
         let found = frontiers(&self.grid, self.cfg.min_frontier_cells);
-        if let Some(choice) = choose_goal(&self.grid, &found, &costs, &self.blacklist, &self.cfg.plan) {
-            self.path = self.world_path(&costs, choice.goal);
-            return ExploreState::Going { goal_m: self.grid.centre_of(choice.goal) };
+        while let Some(choice) = choose_goal(&self.grid, &found, &costs, &self.blacklist, &self.cfg.plan) {
+            let goal_m = self.grid.centre_of(choice.goal);
+            if self.plan_view(&costs, goal_m) {
+                return ExploreState::Going { goal_m };
+            }
+            self.blacklist.push(goal_m);
         }
         let home = self.home_m;
         let at_home = (home[0] - pose.x_m).hypot(home[1] - pose.y_m) <= self.cfg.control.goal_tolerance_m;
@@ -284,6 +321,34 @@ impl Explorer {
             return ExploreState::Returning;
         }
         self.nowhere()
+    }
+
+    /// Plans the way from `pose` to where the frontier cell at `goal_m` is looked at from.
+    fn way_to_view(&mut self, pose: &Pose2, goal_m: [f64; 2]) -> bool {
+        match self.costs_from(pose) {
+            Some(costs) => self.plan_view(&costs, goal_m),
+            None => false,
+        }
+    }
+
+    /// Sets the way (by `costs`) to where the frontier cell at `goal_m` is looked at from
+    /// ([`ExploreConfig::view_from_m`]; the cell itself with (0, 0)); false when there is no
+    /// such place, or it is where the base last swept (it has looked from there).
+    fn plan_view(&mut self, costs: &Costs, goal_m: [f64; 2]) -> bool {
+        let Some(target) = self.grid.cell_of(goal_m[0], goal_m[1]) else { return false };
+        let (near, far) = self.cfg.view_from_m;
+        let view = if far > 0.0 { viewpoint(&self.grid, costs, target, near, far) } else { Some(target) };
+        let Some(view) = view else { return false };
+        let [x, y] = self.grid.centre_of(view);
+        if far > 0.0 && self.swept_at.is_some_and(|s| (s[0] - x).hypot(s[1] - y) < SAME_PLACE_M) {
+            return false;
+        }
+        let path = self.world_path(costs, view);
+        if path.is_empty() {
+            return false;
+        }
+        self.path = path;
+        true
     }
 
     fn nowhere(&mut self) -> ExploreState {

@@ -4,12 +4,14 @@
 //! ([`frontiers`]), the floor the base can use and the travel over it ([`usable`], [`Costs`]),
 //! and the frontier worth going to ([`choose_goal`]), and the twist that drives the omni base
 //! along the way, slowed for what the live scan sees ([`LocalController`]); and the loop of
-//! them, sweeps, blacklisting and the way home included ([`Explorer`]).
+//! them, sweeps, blacklisting and the way home included ([`Explorer`]); and the explorer on a
+//! robot's LIO poses and wheel odometry ([`Pilot`]).
 
 mod control;
 mod explorer;
 mod frontier;
 mod occupancy;
+mod pilot;
 mod plan;
 #[cfg(test)]
 mod tests;
@@ -22,4 +24,5 @@ pub use control::{clearance_m, BodyTwist, ControlConfig, ControlState, ControlSt
 pub use explorer::{ExploreConfig, ExploreState, ExploreStep, Explorer};
 pub use frontier::{frontiers, is_frontier, Frontier};
 pub use occupancy::{Cell, OccupancyConfig, OccupancyGrid};
-pub use plan::{choose_goal, usable, Costs, GoalChoice, PlanConfig};
+pub use pilot::{Pilot, PilotConfig};
+pub use plan::{choose_goal, usable, viewpoint, Costs, GoalChoice, PlanConfig};

@@ -34,11 +34,22 @@ pub struct OccupancyConfig {
     pub body_height_m: f64,
     /// Rays longer than this (m, in the plane) are cut: far returns are sparse and noisy.
     pub max_range_m: f64,
+    /// The LiDAR's minimum range: a ray clears no cell nearer than this to the sensor (in the
+    /// plane), since something there would not have returned it (0: every cell it crosses).
+    pub min_range_m: f64,
 }
 
 impl Default for OccupancyConfig {
     fn default() -> Self {
-        Self { cell_m: 0.1, extent_m: 80.0, floor_z_m: 0.0, max_step_m: 0.05, body_height_m: 1.2, max_range_m: 15.0 }
+        Self {
+            cell_m: 0.1,
+            extent_m: 80.0,
+            floor_z_m: 0.0,
+            max_step_m: 0.05,
+            body_height_m: 1.2,
+            max_range_m: 15.0,
+            min_range_m: 0.0,
+        }
     }
 }
 
@@ -144,6 +155,62 @@ impl OccupancyGrid {
     /// height: it stood there. The LiDAR never sees the floor right under and beside it, and
     /// without this the way back to where the base started would end short of it.
     pub fn mark_driven(&mut self, x: f64, y: f64, radius_m: f64) {
+        let floor_z = self.cfg.floor_z_m as f32;
+        self.for_cells_within(x, y, radius_m, |v, f| {
+            *v = -CLAMP;
+            if !f.is_finite() {
+                *f = floor_z;
+            }
+        });
+    }
+
+    /// The floor around (x, y), `radius_m` around, that the LiDAR cannot see from there
+    /// (nearer than its minimum range, or under its view), taken as free floor at the grid's
+    /// floor height where the floor just past it, straight out from (x, y), was seen: where the
+    /// base starts, which the operator put it down in. Where what lies just past the ring is an
+    /// obstacle or unknown (a bed reaching into the ring from beyond it), the ring stays
+    /// unknown; occupied cells stay as they are. Without it a base that has not yet driven
+    /// knows no floor it could reach from where it stands.
+    pub fn assume_blind_floor(&mut self, x: f64, y: f64, radius_m: f64) {
+        let Some(centre) = self.cell_of(x, y) else { return };
+        let [cx, cy] = self.centre_of(centre);
+        let beyond_m = radius_m + 2.0 * self.cfg.cell_m;
+        let r = (radius_m.max(0.0) / self.cfg.cell_m).ceil().min(self.side as f64) as i64;
+        let mut assumed = Vec::new();
+        for dj in -r..=r {
+            for di in -r..=r {
+                let d = ((di * di + dj * dj) as f64).sqrt() * self.cfg.cell_m;
+                if d > radius_m || d == 0.0 {
+                    continue;
+                }
+                let (i, j) = (centre.0 as i64 + di, centre.1 as i64 + dj);
+                let past = self.cell_of(
+                    cx + di as f64 * self.cfg.cell_m / d * beyond_m,
+                    cy + dj as f64 * self.cfg.cell_m / d * beyond_m,
+                );
+                if past.is_some_and(|c| self.traversable(c)) {
+                    if let Some(k) = self.index_unbounded((i, j)) {
+                        assumed.push(k);
+                    }
+                }
+            }
+        }
+        let floor_z = self.cfg.floor_z_m as f32;
+        for k in assumed {
+            if let (Some(v), Some(f)) = (self.log_odds.get_mut(k), self.floor_m.get_mut(k)) {
+                if *v < DECIDED {
+                    *v = (*v).min(-DECIDED);
+                    if !f.is_finite() {
+                        *f = floor_z;
+                    }
+                }
+            }
+        }
+    }
+
+    /// `f(log-odds, floor)` of every cell whose centre's offset from (x, y)'s cell is within
+    /// `radius_m`.
+    fn for_cells_within(&mut self, x: f64, y: f64, radius_m: f64, mut f: impl FnMut(&mut i8, &mut f32)) {
         let Some((ci, cj)) = self.cell_of(x, y) else { return };
         let r = (radius_m.max(0.0) / self.cfg.cell_m).ceil().min(self.side as f64) as i64;
         for dj in -r..=r {
@@ -153,11 +220,8 @@ impl OccupancyGrid {
                     continue;
                 }
                 let Some(k) = self.index((i as usize, j as usize)) else { continue };
-                if let (Some(v), Some(f)) = (self.log_odds.get_mut(k), self.floor_m.get_mut(k)) {
-                    *v = -CLAMP;
-                    if !f.is_finite() {
-                        *f = self.cfg.floor_z_m as f32;
-                    }
+                if let (Some(v), Some(fl)) = (self.log_odds.get_mut(k), self.floor_m.get_mut(k)) {
+                    f(v, fl);
                 }
             }
         }
@@ -253,13 +317,16 @@ impl OccupancyGrid {
     /// Lowers the log-odds of every cell from `a` (inside the grid) up to (not including) `b`,
     /// except `hit` ones; a ray leaving the grid stops there (it cannot come back in).
     fn pass_along(&mut self, a: (usize, usize), (x1, y1): (i64, i64), hit: &VoxelHashSet<usize>) {
+        let blind_cells = self.cfg.min_range_m / self.cfg.cell_m;
+        let blind_sq = (blind_cells * blind_cells).floor() as i64;
         let (mut x, mut y) = (a.0 as i64, a.1 as i64);
         let (dx, dy) = ((x1 - x).abs(), -(y1 - y).abs());
         let (sx, sy) = (if x < x1 { 1 } else { -1 }, if y < y1 { 1 } else { -1 });
         let mut err = dx + dy;
         while (x, y) != (x1, y1) {
             let Some(k) = self.index_unbounded((x, y)) else { break };
-            if !hit.contains(&k) {
+            let near = (x - a.0 as i64).pow(2) + (y - a.1 as i64).pow(2) < blind_sq;
+            if !hit.contains(&k) && !near {
                 self.bump(k, PASS);
             }
             let e2 = 2 * err;

@@ -197,3 +197,26 @@ pub fn choose_goal(
         })
         .max_by(|a, b| a.utility.total_cmp(&b.utility))
 }
+
+/// Where to look at `target` from, for a LiDAR that sees nothing nearer than `near_m`: the
+/// reachable cell (by `costs`) cheapest to get to whose centre lies between `near_m` and
+/// `far_m` from `target`'s. `None` when no such cell can be reached.
+pub fn viewpoint(
+    grid: &OccupancyGrid,
+    costs: &Costs,
+    target: (usize, usize),
+    near_m: f64,
+    far_m: f64,
+) -> Option<(usize, usize)> {
+    let cell_m = grid.config().cell_m;
+    let r = (far_m / cell_m).ceil() as i64;
+    let square: Vec<(i64, i64)> = (-r..=r).flat_map(|dj| (-r..=r).map(move |di| (di, dj))).collect();
+    let [tx, ty] = grid.centre_of(target);
+    around(grid.side(), target, &square)
+        .filter(|&c| {
+            let [x, y] = grid.centre_of(c);
+            let d = (x - tx).hypot(y - ty);
+            (near_m..=far_m).contains(&d) && costs.to(c).is_finite()
+        })
+        .min_by(|a, b| costs.to(*a).total_cmp(&costs.to(*b)))
+}

@@ -284,3 +284,66 @@ fn a_thin_band_without_floor_returns_at_the_edge_of_the_seen_floor_is_looked_pas
         found.iter().map(|f| f.centroid_m).collect::<Vec<_>>()
     );
 }
+
+#[test]
+fn a_ray_clears_nothing_nearer_than_the_lidars_minimum_range() {
+    let cfg = OccupancyConfig { extent_m: 20.0, min_range_m: 1.0, ..OccupancyConfig::default() };
+    let mut g = OccupancyGrid::new(cfg, [0.0, 0.0]).unwrap();
+    // A chair leg at (3, 2) seen from (1, 2), then, from (2.5, 2), 0.5 m from it and so
+    // unseen, rays past it to the wall at x = 6 cross its cell.
+    let leg = [Vector3::new(3.0, 2.0, 0.4)];
+    g.add_scan(&Vector3::new(1.0, 2.0, 0.5), leg.iter());
+    let wall = line([6.0, 1.8], [6.0, 2.2], 0.8);
+    for _ in 0..20 {
+        g.add_scan(&Vector3::new(2.5, 2.0, 0.5), wall.iter());
+    }
+    assert_eq!(g.cell(at(&g, 3.0, 2.0)), Cell::Occupied, "the leg is kept");
+    assert_eq!(g.cell(at(&g, 4.0, 2.0)), Cell::Free, "past the minimum range the rays clear");
+    // Without the minimum range the same rays wipe the leg out.
+    let mut ideal = OccupancyGrid::new(OccupancyConfig { min_range_m: 0.0, ..cfg }, [0.0, 0.0]).unwrap();
+    ideal.add_scan(&Vector3::new(1.0, 2.0, 0.5), leg.iter());
+    for _ in 0..20 {
+        ideal.add_scan(&Vector3::new(2.5, 2.0, 0.5), wall.iter());
+    }
+    assert_eq!(ideal.cell(at(&ideal, 3.0, 2.0)), Cell::Free);
+}
+
+#[test]
+fn the_starts_blind_ring_is_floor_where_floor_was_seen_past_it() {
+    let cfg = OccupancyConfig { extent_m: 20.0, min_range_m: 1.0, ..OccupancyConfig::default() };
+    let mut g = OccupancyGrid::new(cfg, [0.0, 0.0]).unwrap();
+    // Seen from (0, 0) with nothing nearer than 1 m: floor from 1.0 to 2.5 m all round, but
+    // to the east a bed's side (0.4 m up) from 1.0 m on, which may reach into the ring.
+    let mut pts = Vec::new();
+    for k in 0..360 {
+        let a = f64::from(k).to_radians();
+        let east = a.cos() > 0.9;
+        let mut d = 1.0;
+        while d <= 2.5 {
+            pts.push(Vector3::new(d * a.cos(), d * a.sin(), if east { 0.4 } else { 0.0 }));
+            d += 0.05;
+        }
+    }
+    g.add_scan(&Vector3::new(0.0, 0.0, 0.5), &pts);
+    let (north, east) = (at(&g, 0.0, 0.7), at(&g, 0.7, 0.0));
+    assert_eq!((g.cell(north), g.cell(east)), (Cell::Unknown, Cell::Unknown), "nothing seen inside 1 m");
+    g.assume_blind_floor(0.0, 0.0, 0.95);
+    assert!(g.traversable(north) && g.floor(north) == Some(0.0));
+    assert!(!g.traversable(east) && g.cell(east) == Cell::Unknown, "not towards the bed");
+}
+
+#[test]
+fn a_frontier_is_looked_at_from_beyond_the_minimum_range_by_the_cheapest_way() {
+    let g = room_with_door(1.2);
+    let robot = at(&g, 1.0, 2.0);
+    let costs = Costs::from(&g, &usable(&g, robot, 0.35), robot);
+    let target = at(&g, 6.5, 2.0);
+    let v = viewpoint(&g, &costs, target, 1.1, 2.1).unwrap();
+    let ([vx, vy], [tx, ty]) = (g.centre_of(v), g.centre_of(target));
+    let d = (vx - tx).hypot(vy - ty);
+    assert!((1.1..=2.1).contains(&d), "{d}");
+    // On the way there, not round the far side: the room is west of the doorway.
+    assert!(vx < 6.0 && (4.0..=5.5).contains(&vx), "{vx} {vy}");
+    // Nothing can be reached that far from a target out in the unknown.
+    assert!(viewpoint(&g, &costs, at(&g, 12.0, 2.0), 1.1, 2.1).is_none());
+}
