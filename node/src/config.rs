@@ -47,6 +47,9 @@ pub struct RobotNodeConfig {
     /// The ROS 2 bridge (docs/ros2.md): off unless `enabled`.
     #[serde(default)]
     pub ros2: starc_link::ros2::Ros2Config,
+    /// The robot explores on its own (`[explore]`, docs/explore.md): off unless `enabled`.
+    #[serde(default)]
+    pub explore: Option<crate::explore::ExploreNodeConfig>,
 }
 
 fn default_map_period_ms() -> u64 {
@@ -228,7 +231,23 @@ impl RobotNodeConfig {
         check_link(&cfg.link, path)?;
         check_ros2(&cfg.ros2, path)?;
         cfg.detect.validate().map_err(|e| NodeError::Config(format!("{}: [detect] {e}", path.display())))?;
+        cfg.check_explore().map_err(|e| NodeError::Config(format!("{}: {e}", path.display())))?;
         Ok(cfg)
+    }
+
+    /// `[explore]` checked, and one driver per base: with the explorer on, `/cmd_vel` drives
+    /// the explorer's base, so `[ros2] base_config`, if given, must name the same file.
+    pub fn check_explore(&self) -> Result<()> {
+        let Some(e) = self.explore.as_ref().filter(|e| e.enabled) else { return Ok(()) };
+        e.validate()?;
+        match &self.ros2.base_config {
+            Some(b) if self.ros2.cmd_vel && *b != e.base_config => Err(NodeError::Config(format!(
+                "[ros2] base_config {} and [explore] base_config {} differ: one base, one driver",
+                b.display(),
+                e.base_config.display()
+            ))),
+            _ => Ok(()),
+        }
     }
 
     /// Relative paths in the file are relative to the file.
@@ -240,6 +259,9 @@ impl RobotNodeConfig {
         self.ros2.resolve_paths(config.parent().unwrap_or(Path::new(".")));
         if let Some(w) = self.wheels.as_mut() {
             w.resolve_paths(config);
+        }
+        if let Some(e) = self.explore.as_mut() {
+            e.resolve_paths(config);
         }
     }
 }
@@ -411,6 +433,30 @@ mod tests {
         assert_eq!(feedback.wheels.len(), feedback.kinematics.wheel_count());
         std::fs::write(&path, "[wheels]\ncan = \"can0\"\nbogus = 1\n[link]\n").unwrap();
         assert!(RobotNodeConfig::from_file(&path).is_err());
+    }
+
+    #[test]
+    fn an_explore_table_names_the_base_relative_to_the_file_and_shares_it_with_teleop() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("robot.toml");
+        let explore = "[explore]\nenabled = true\nbase_config = \"base.toml\"\nlidar_height_m = 0.45\n";
+        std::fs::write(&path, format!("{explore}\n[link]\nlisten = [\"tcp/127.0.0.1:7447\"]\n")).unwrap();
+        let cfg = RobotNodeConfig::from_file(&path).unwrap();
+        let e = cfg.explore.unwrap();
+        assert!(e.enabled && e.base_config == dir.path().join("base.toml") && e.resume_after_s.is_none());
+        // /cmd_vel beside it must drive the same base, through the explorer's driver.
+        let mut cfg = RobotNodeConfig::from_file(&path).unwrap();
+        cfg.ros2.cmd_vel = true;
+        cfg.ros2.base_config = Some(dir.path().join("other.toml"));
+        let err = cfg.check_explore().unwrap_err().to_string();
+        assert!(err.contains("one base, one driver"), "{err}");
+        cfg.ros2.base_config = Some(dir.path().join("base.toml"));
+        cfg.check_explore().unwrap();
+        // A bad value names the table.
+        std::fs::write(&path, "[explore]\nenabled = true\nbase_config = \"b\"\nlidar_height_m = -1.0\n[link]\n")
+            .unwrap();
+        let err = RobotNodeConfig::from_file(&path).unwrap_err().to_string();
+        assert!(err.contains("[explore] lidar_height_m"), "{err}");
     }
 
     #[test]

@@ -9,6 +9,7 @@ pub mod error;
 pub use background::lower_this_thread;
 pub use error::{NodeError, Result};
 pub mod config;
+pub mod explore;
 pub mod fpv;
 pub mod recording;
 pub mod robot;

@@ -4,6 +4,7 @@
 //! per tile: a congested link never holds up a scan); optionally everything recorded.
 
 use super::config::{driver_for, lio_config, RobotNodeConfig};
+use super::explore::ExploreDrive;
 use super::recording::{NodeRecorder, RecordOptions, RecordingCounts};
 use super::ros2::{Ros2Out, Ros2Summary};
 use super::tiles::LatestTiles;
@@ -50,6 +51,8 @@ pub struct RobotSummary {
     /// Messages the link refused or failed to send (a non-finite pose, a session error): each
     /// counted and logged, none the end of the node.
     pub publish_errors: u64,
+    /// What the explorer did (none: `[explore]` off).
+    pub explore: Option<super::explore::ExploreSummary>,
     pub peak_rss_mib: Option<f64>,
 }
 
@@ -89,22 +92,15 @@ pub async fn run(
     let (map_tx, map_thread) = spawn_map(map, period, tiles.clone())?;
     let record = RecordOptions { fsync: cfg.record_fsync };
     let mut recorder = cfg.record.as_deref().map(|p| NodeRecorder::create_with(p, "robot", record)).transpose()?;
-    let (cmd_vel_tx, teleop) = match (cfg.ros2.enabled && cfg.ros2.cmd_vel, cfg.ros2.base_config.clone()) {
-        (true, Some(base)) => {
-            let (tx, rx) = tokio::sync::mpsc::channel(16);
-            let silent = Duration::from_millis(cfg.ros2.cmd_vel_timeout_ms);
-            let teleop = async move {
-                let result = super::teleop::drive(&base, rx, silent).await;
-                if let Err(e) = &result {
-                    tracing::error!("/cmd_vel cannot drive the base: {e}");
-                }
-                result
-            };
-            (Some(tx), Some(tokio::spawn(teleop)))
-        }
-        _ => (None, None),
-    };
+    let explore_cfg = cfg.explore.clone().filter(|e| e.enabled);
+    let (cmd_vel_tx, teleop, mut cmd_vel_rx) = teleop_route(&cfg, explore_cfg.is_some());
     let mut ros2 = Ros2Out::start(&cfg.ros2, "robot", cmd_vel_tx)?;
+    let mut explore = match &explore_cfg {
+        Some(e) => Some(ExploreDrive::open(e, cfg.ros2.cmd_vel_timeout_ms).await?),
+        None => None,
+    };
+    let mut control = tokio::time::interval(explore_cfg.as_ref().map_or(Duration::from_secs(3600), |e| e.period()));
+    control.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let link = Arc::new(LinkNode::open(&cfg.link, Role::Robot).await?);
     let tile_task = tokio::spawn(send_tiles(link.clone(), tiles.clone()));
     let (mut wheel_rx, wheel_task, mut wheels) = match &cfg.wheels {
@@ -127,6 +123,25 @@ pub async fn run(
     loop {
         tokio::select! {
             _ = wait_stop(&mut stop) => break,
+            _ = control.tick(), if explore.is_some() => {
+                let now = host_now_ns();
+                if let Some(x) = explore.as_mut() {
+                    if let Err(e) = x.control(now, host_to_lidar.to_lidar(now)).await {
+                        tracing::error!("exploring stopped: {e}");
+                        explore = None;
+                    }
+                }
+            }
+            tw = async { match cmd_vel_rx.as_mut() { Some(r) => r.recv().await, None => std::future::pending().await } } => {
+                match (tw, explore.as_mut()) {
+                    (Some(tw), Some(x)) => {
+                        if let Err(e) = x.teleop(super::teleop::base_twist(&tw), host_now_ns()).await {
+                            tracing::error!("/cmd_vel: {e}");
+                        }
+                    }
+                    _ => cmd_vel_rx = None,
+                }
+            }
             rx = async { match wheel_rx.as_mut() { Some(r) => r.recv().await, None => std::future::pending().await } } => {
                 let (Some((host_ns, frame)), Some(odometry)) = (rx, wheels.as_mut()) else {
                     // The bus failed (logged where it did) or a replay came to its end.
@@ -145,6 +160,10 @@ pub async fn run(
                 }
                 if let Some(step) = odometry.frame(t_ns, &frame) {
                     push_wheel(&mut core, &step, lidar_clock(&scan_hosts), recorder.as_mut());
+                    if let Some(x) = explore.as_mut() {
+                        let tw = step.twist;
+                        x.on_wheels(tw.t_ns, tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s);
+                    }
                 }
             }
             ev = events.recv() => {
@@ -166,9 +185,9 @@ pub async fn run(
                     }
                     None => {}
                 }
-                for placed in core.take_unmapped() {
-                    let _ = map_tx.send(placed);
-                }
+                let placed = core.take_unmapped();
+                let placed_at: Vec<(u64, nalgebra::Isometry3<f64>)> =
+                    steps.iter().map(|s| (s.output.end_ns, s.output.lidar_pose)).collect();
                 for step in steps.drain(..) {
                     // The detection leaves first: it is what the latency is measured on.
                     if let Some(det) = step.detection {
@@ -205,6 +224,16 @@ pub async fn run(
                         let _ = w.send(RobotEvent::Pose { end_ns: o.end_ns, lidar_pose: o.lidar_pose });
                     }
                 }
+                // After the poses and detections are out: the explorer's grid takes a few ms.
+                if let Some(x) = explore.as_mut() {
+                    for ((end_ns, pose), scan) in placed_at.iter().zip(&placed) {
+                        let points: Vec<nalgebra::Vector3<f64>> = scan.points.iter().map(|p| p.xyz()).collect();
+                        x.on_scan(*end_ns, pose, &points);
+                    }
+                }
+                for scan in placed {
+                    let _ = map_tx.send(scan);
+                }
             }
         }
     }
@@ -212,6 +241,10 @@ pub async fn run(
         task.abort();
     }
     summary.wheel_twists = wheels.as_ref().map_or(0, |w| w.twists);
+    // The base halts before anything else is closed.
+    if let Some(x) = explore.take() {
+        summary.explore = Some(x.finish().await);
+    }
     // The last tiles, so a rig that joins after the run still gets the whole map: the map
     // thread hands them over once it has everything.
     for placed in core.take_unmapped() {
@@ -259,6 +292,35 @@ pub async fn run(
     summary.peak_rss_mib = starc_pipeline::timing::peak_rss_mib();
     tracing::info!(?summary, "robot node down");
     Ok(summary)
+}
+
+type Teleop = tokio::task::JoinHandle<Result<()>>;
+type CmdVel = tokio::sync::mpsc::Receiver<starc_pipeline::record::msgs::Twist>;
+
+/// Where `/cmd_vel` goes (`[ros2] cmd_vel`): with the explorer on, to the node's loop, which
+/// hands it to the explorer's base (one driver per base); without it, to a base task of its own
+/// (`[ros2] base_config`). The sender for the bridge, that task, the loop's receiver.
+fn teleop_route(
+    cfg: &RobotNodeConfig,
+    exploring: bool,
+) -> (Option<tokio::sync::mpsc::Sender<starc_pipeline::record::msgs::Twist>>, Option<Teleop>, Option<CmdVel>) {
+    if !(cfg.ros2.enabled && cfg.ros2.cmd_vel) {
+        return (None, None, None);
+    }
+    let (tx, rx) = tokio::sync::mpsc::channel(16);
+    if exploring {
+        return (Some(tx), None, Some(rx));
+    }
+    let Some(base) = cfg.ros2.base_config.clone() else { return (None, None, None) };
+    let silent = Duration::from_millis(cfg.ros2.cmd_vel_timeout_ms);
+    let teleop = async move {
+        let result = super::teleop::drive(&base, rx, silent).await;
+        if let Err(e) = &result {
+            tracing::error!("/cmd_vel cannot drive the base: {e}");
+        }
+        result
+    };
+    (Some(tx), Some(tokio::spawn(teleop)), None)
 }
 
 /// How long the node waits, when stopping, for /cmd_vel's base task to halt the base.
