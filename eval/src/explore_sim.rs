@@ -3,7 +3,7 @@
 //! 70 x 77 deg view, cast into the simulator's world, people included) scans it. This measures the
 //! explorer's policy (where it goes, how much floor it comes to know, whether it touches
 //! anything) against the scenario's scripted route scanned the same way; it is not the closed
-//! loop over the mock devices with the LIO's poses (`starc sim --explore`, not built yet).
+//! loop over the mock devices with the LIO's poses (`starc sim --explore`, [`crate::explore_loop`]).
 
 use nalgebra::Vector3;
 use starc_hil::rng::{hash2, SplitMix64};
@@ -90,7 +90,7 @@ pub fn scan(
 
 /// Whether the base's disc of `radius_m` at `pose` touches anything: horizontal rays in 16
 /// directions at three heights.
-fn touches(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> bool {
+pub fn touches(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> bool {
     let bodies = world.bodies_at(t_s);
     (0..16).any(|k| {
         let a = f64::from(k) * std::f64::consts::TAU / 16.0;

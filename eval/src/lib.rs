@@ -30,6 +30,7 @@ pub mod dataset;
 pub mod detection;
 pub mod drift;
 pub mod error;
+pub mod explore_loop;
 pub mod explore_sim;
 pub mod map_sight;
 pub mod odometry;

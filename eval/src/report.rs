@@ -149,8 +149,11 @@ pub struct PoseErrorReport {
 /// of its occupancy grid. Offline runs only (the live robot node does not grow the grid yet).
 #[derive(Debug, Serialize)]
 pub struct ExplorationReport {
-    /// Which route: "scripted" (the scenario's waypoints) until the robot explores on its own.
+    /// Which route: "scripted" (the scenario's waypoints) or "explorer" (`starc sim --explore`).
     pub route: &'static str,
+    /// The closed loop's own report (`starc_eval::explore_loop::LoopReport`, as the run's
+    /// exploration.json holds it) when the explorer drove.
+    pub closed_loop: Option<serde_json::Value>,
     /// At the end (NaN, written null, without a grid).
     pub area_m2: f64,
     /// (seconds since the robot's first pose, m^2), every 5 s of the robot's time.

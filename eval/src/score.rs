@@ -154,7 +154,8 @@ impl Scorer {
     fn exploration(&self) -> ExplorationReport {
         let first = self.truth.gt_robot.first().map_or(0, |g| g.0);
         ExplorationReport {
-            route: "scripted",
+            route: if self.truth.explored.is_some() { "explorer" } else { "scripted" },
+            closed_loop: self.truth.explored.clone(),
             area_m2: self.explored.last().map_or(f64::NAN, |e| e.1),
             area_by_time: self.explored.iter().map(|&(t, a)| [t.saturating_sub(first) as f64 * 1e-9, a]).collect(),
         }
@@ -511,6 +512,7 @@ mod tests {
             frames: Vec::new(),
             mount: CameraMount { camera: CameraModel::default(), lidar_t_camera: Isometry3::identity() },
             robot_returns: None,
+            explored: None,
         }
     }
 

@@ -272,6 +272,9 @@ pub struct Truth {
     /// Which people the robot's returns hit (`labels_robot.bin`); without it, a person's returns
     /// are those of the window inside their box grown by 0.1 m, the floor and furniture included.
     pub robot_returns: Option<PersonReturns>,
+    /// What the closed loop of `starc sim --explore` wrote (`exploration.json`): the robot
+    /// explored instead of following its waypoints. `None` for a scripted run.
+    pub explored: Option<serde_json::Value>,
 }
 
 impl Truth {
@@ -304,6 +307,7 @@ impl Truth {
             frames: read_frames(&frames_path)?,
             mount: read_camera(&dir.join("extrinsics.json"))?,
             robot_returns,
+            explored: read_explored(&dir.join("exploration.json"))?,
         })
     }
 
@@ -328,6 +332,15 @@ impl Truth {
         );
         lio_t_world * at(&self.gt_fpv, t_ns) * off
     }
+}
+
+/// A closed loop's report, if the run has one.
+fn read_explored(path: &Path) -> Result<Option<serde_json::Value>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| EvalError::Read { path: path.into(), source })?;
+    serde_json::from_str(&text).map(Some).map_err(|e| EvalError::BadFile { path: path.into(), reason: e.to_string() })
 }
 
 #[cfg(test)]

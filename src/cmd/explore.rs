@@ -99,3 +99,23 @@ fn summarise(rows: &[Building]) {
         q.max,
     );
 }
+
+/// What a closed-loop run (`starc sim --explore`) came to, in a few lines.
+pub fn print_loop(r: &starc_eval::explore_loop::LoopReport) {
+    println!(
+        "  explorer: {:.1} m² of floor known, {:.1} m driven, {}, {} goal(s) given up; contacts {} ({} checks of 50 ms); control step p50 {:.2} ms, p99 {:.2} ms, max {:.1} ms",
+        r.final_area_m2,
+        r.distance_m,
+        r.done_s.map_or("still exploring at the end".to_string(), |t| format!("home and done at {t:.1} s")),
+        r.blacklisted,
+        r.contacts,
+        r.contact_periods,
+        r.step_ms.p50,
+        r.step_ms.p99,
+        r.step_ms.max,
+    );
+    println!(
+        "  base over slcan: {} frames sent, {} feedback frames received, {} fault(s) latched",
+        r.bus.frames_sent, r.bus.feedback_frames, r.base_faults
+    );
+}

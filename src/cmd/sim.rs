@@ -5,7 +5,8 @@
 //! process instead (`mission.rs`); `--sensors-only` (or `--no-camera`) stops after the sensors.
 
 use anyhow::Context;
-use starc_hil::sim::run::{run as run_sim, SimOptions};
+use starc_eval::explore_loop::{ExploreLoop, LoopConfig};
+use starc_hil::sim::run::{run_driven, RobotDriver, SimOptions};
 use starc_hil::sim::scenario::{Scenario, SHIPPED};
 use std::io::Write;
 use std::path::PathBuf;
@@ -69,8 +70,36 @@ pub struct Args {
     /// zenoh endpoint (`tcp/127.0.0.1:7447`, `rmw_zenohd`'s default; docs/ros2.md).
     #[arg(long, value_name = "ENDPOINT")]
     ros2: Option<String>,
+    /// The explorer drives the robot instead of its scripted waypoints: the robot's LIO and
+    /// the explorer run in the loop, the base driver sends their twist over CAN (slcan bytes)
+    /// to the mock motor controllers, and the robot moves as its motors turn
+    /// (docs/explore.md). Writes DIR/exploration.json, which the mission's report.json
+    /// carries under `exploration.closed_loop`.
+    #[arg(long)]
+    explore: bool,
+    /// With --explore: the base driver's settings (config/base.toml's form); its kinematics,
+    /// protocol and wheel ids are set to the simulated base's. Default: the shipped file.
+    #[arg(long, requires = "explore")]
+    base_config: Option<PathBuf>,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,
+}
+
+/// The shipped base driver settings (--explore's template).
+const BASE_TOML: &str = include_str!("../../config/base.toml");
+
+/// The closed loop `--explore` asks for, or none.
+fn explore_loop(args: &Args, scenario: &Scenario) -> anyhow::Result<Option<ExploreLoop>> {
+    if !args.explore {
+        return Ok(None);
+    }
+    let text = match &args.base_config {
+        Some(path) => std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
+        None => BASE_TOML.to_string(),
+    };
+    let template = starc_base::BaseConfig::from_toml(&text).context("--base-config")?;
+    let cfg = LoopConfig::for_robot(scenario.robot.get_ref(), template, args.seed);
+    Ok(Some(ExploreLoop::new(scenario, cfg)?))
 }
 
 /// The live views `--http`, `--foxglove` and `--view-token-file` ask for, checked before any
@@ -107,7 +136,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let (scenario, text) = Scenario::load(&args.scenario)?;
-    let blocked = starc_hil::sim::route_check::check_routes(&scenario);
+    let mut blocked = starc_hil::sim::route_check::check_routes(&scenario);
+    if args.explore {
+        // The explorer chooses the robot's way; only the others' scripted routes must be clear.
+        blocked.retain(|v| v.mover != starc_hil::sim::route_check::Mover::Robot);
+    }
     if !blocked.is_empty() {
         let lines: Vec<String> = blocked.iter().map(|v| format!("  {v}")).collect();
         anyhow::bail!("{}: a route runs into something:\n{}", args.scenario, lines.join("\n"));
@@ -136,8 +169,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             eprintln!("{done:.0} / {total:.0} s simulated");
         }
     };
-    let summary = run_sim(&scenario, &text, &opts, &mut progress)
-        .with_context(|| format!("simulating {} into {}", scenario.name, args.out.display()))?;
+    let mut driver = explore_loop(&args, &scenario)?;
+    let summary =
+        run_driven(&scenario, &text, &opts, driver.as_mut().map(|d| d as &mut dyn RobotDriver), &mut progress)
+            .with_context(|| format!("simulating {} into {}", scenario.name, args.out.display()))?;
     if interactive {
         eprintln!();
     }
@@ -163,6 +198,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             d.returns,
             d.person_returns
         );
+    }
+    let exploration_json = args.out.join("exploration.json");
+    match driver.map(|d| d.report()) {
+        Some(r) => {
+            super::explore::print_loop(&r);
+            std::fs::write(&exploration_json, serde_json::to_string_pretty(&r)?)
+                .with_context(|| format!("writing {}", exploration_json.display()))?;
+        }
+        // A scripted run into a directory an explored one used: its mission must not read that.
+        None if exploration_json.exists() => std::fs::remove_file(&exploration_json)
+            .with_context(|| format!("removing the old {}", exploration_json.display()))?,
+        None => {}
     }
     println!("  wrote {}", args.out.display());
     if args.offline {

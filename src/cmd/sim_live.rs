@@ -166,6 +166,8 @@ pub fn run(dir: &Path, opts: &LiveOptions) -> anyhow::Result<()> {
         record_fsync: false,
         link: link(Some(link_port), None)?,
         ros2: ros2_config(opts.ros2.as_deref()),
+        // The replayed run's robot moved as recorded: nothing here drives a base.
+        explore: None,
     };
     let q = lidar_t_camera.rotation.quaternion();
     let c = lidar_t_camera.translation.vector;
@@ -442,6 +444,7 @@ mod tests {
             frames: Vec::new(),
             mount: CameraMount { camera: Default::default(), lidar_t_camera: Isometry3::identity() },
             robot_returns: None,
+            explored: None,
         }
     }
 

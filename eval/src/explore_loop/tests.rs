@@ -1,0 +1,54 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+use super::*;
+use starc_hil::sim::run::{run_driven, SimOptions};
+
+const BASE_TOML: &str = include_str!("../../../config/base.toml");
+
+/// The shipped lab, its robot driven by the explorer for `duration_s`, sensors only.
+fn explore_lab(duration_s: f64, dir: &std::path::Path) -> ExploreLoop {
+    let (scenario, text) = Scenario::load("lab").unwrap();
+    let template = BaseConfig::from_toml(BASE_TOML).unwrap();
+    let mut driver = ExploreLoop::new(&scenario, LoopConfig::for_robot(scenario.robot.get_ref(), template, 1)).unwrap();
+    let opts = SimOptions { out: dir.into(), duration_s: Some(duration_s), seed: 1, realtime: false, camera: false };
+    run_driven(&scenario, &text, &opts, Some(&mut driver as &mut dyn RobotDriver), &mut |_, _| {}).unwrap();
+    driver
+}
+
+#[test]
+fn the_explorer_drives_the_simulated_base_over_slcan_on_its_own_lio() {
+    let dir = tempfile::tempdir().unwrap();
+    let driver = explore_lab(14.0, dir.path());
+    let r = driver.report();
+    // It swept (about 7 s from the LIO's start) and then drove off towards a frontier.
+    assert!(r.distance_m > 1.0, "{r:?}");
+    assert_eq!((r.contacts, r.base_faults), (0, 0), "{r:?}");
+    assert!(r.final_area_m2 > 20.0 && r.timeline.windows(2).all(|w| w[0].0 < w[1].0), "{r:?}");
+    // Every 10 ms a command frame went out, and the three ESCs answered at 1 kHz.
+    assert!(r.bus.frames_sent >= 1390 && r.bus.feedback_frames >= 3 * 13_900, "{:?}", r.bus);
+    assert_eq!(r.bus.motors.adapter.refused, 0);
+    // The simulator moved the robot along the track the motors drove: its truth file ends
+    // where the track does.
+    let truth = std::fs::read_to_string(dir.path().join("gt_robot.tum")).unwrap();
+    let last: Vec<f64> = truth.lines().last().unwrap().split(' ').map(|v| v.parse().unwrap()).collect();
+    let end = driver.track.at(14.0);
+    assert!((last[1] - end.x).abs() < 0.01 && (last[2] - end.y).abs() < 0.01, "{last:?} {end:?}");
+    // The pilot's pose (the LIO's, carried by the wheels) moved as the truth did, from the start.
+    let start = driver.track.at(0.0);
+    let pose = driver.pilot.pose_at(14_000_000_000u64.saturating_add_signed(AviaLink::ptp_offset_ns())).unwrap();
+    let true_moved = (end.x - start.x).hypot(end.y - start.y);
+    let home = driver.pilot.explorer().unwrap().home();
+    let lio_moved = (pose.x_m - home[0]).hypot(pose.y_m - home[1]);
+    assert!(true_moved > 0.8 && (lio_moved - true_moved).abs() < 0.05, "{lio_moved} m against {true_moved} m");
+}
+
+#[test]
+fn the_simulated_base_is_set_up_as_the_scenario_builds_it() {
+    let (scenario, _) = Scenario::load("lab").unwrap();
+    let template = BaseConfig::from_toml(BASE_TOML).unwrap();
+    let cfg = sim_base_config(scenario.robot.get_ref(), template.clone());
+    assert_eq!(cfg.kinematics, starc_hil::sim::wheels::default_geometry(scenario.robot.get_ref().wheels));
+    let ids: Vec<u8> = cfg.motors.wheels.iter().map(|w| w.id).collect();
+    assert_eq!(ids, (1..=cfg.kinematics.wheel_count() as u8).collect::<Vec<_>>());
+    // The rest is the template's: limits, watchdog, gains.
+    assert_eq!((cfg.limits, cfg.watchdog_ms), (template.limits, template.watchdog_ms));
+}
