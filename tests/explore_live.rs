@@ -6,10 +6,10 @@
 
 #[path = "support/base_toml.rs"]
 mod base_toml;
-use base_toml::slcan_base_toml;
+use base_toml::cia402_drives;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use starc_base::Twist;
-use starc_hil::motors::{MockMotors, MockMotorsConfig, MockProtocol};
+use starc_hil::motors::MockMotors;
 use starc_node::explore::{ExploreDrive, ExploreNodeConfig};
 use starc_pipeline::explore::ExploreState;
 use std::time::Duration;
@@ -35,17 +35,7 @@ fn room() -> Vec<Vector3<f64>> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_explorer_drives_the_base_and_teleop_takes_over() {
     let dir = tempfile::tempdir().unwrap();
-    let can = dir.path().join("can");
-    let config = MockMotorsConfig {
-        protocol: MockProtocol::Cia402,
-        port: can.clone(),
-        ids: vec![1, 2, 3],
-        ..Default::default()
-    };
-    let mock = MockMotors::spawn(config).await.unwrap();
-    let base_toml = dir.path().join("base.toml");
-    std::fs::write(&base_toml, slcan_base_toml(&can, "cia402", "{ id = 1 }, { id = 2 }, { id = 3 }", (2.0, 4.0), ""))
-        .unwrap();
+    let (mock, base_toml) = cia402_drives(dir.path(), (2.0, 4.0)).await;
     let cfg: ExploreNodeConfig =
         toml::from_str(&format!("enabled = true\nbase_config = {base_toml:?}\nlidar_height_m = 0.5\n")).unwrap();
     cfg.validate().unwrap();

@@ -7,8 +7,7 @@
 
 #[path = "support/base_toml.rs"]
 mod base_toml;
-use base_toml::slcan_base_toml;
-use starc_hil::motors::{MockMotors, MockMotorsConfig, MockProtocol};
+use base_toml::cia402_drives;
 use starc_link::ros2::Ros2Config;
 use starc_link::TlsConfig;
 use starc_node::ros2::Ros2Out;
@@ -41,17 +40,7 @@ async fn drive_through_router(python: &PathBuf, cmd_vel_from: &str) -> (serde_js
     let dir = tempfile::tempdir().unwrap();
     starc_link::certs::make_certs(&dir.path().join("certs"), &["127.0.0.1".to_string()], false).unwrap();
     let certs = dir.path().join("certs");
-    let can = dir.path().join("can");
-    let config = MockMotorsConfig {
-        protocol: MockProtocol::Cia402,
-        port: can.clone(),
-        ids: vec![1, 2, 3],
-        ..Default::default()
-    };
-    let mock = MockMotors::spawn(config).await.unwrap();
-    let base_toml = dir.path().join("base.toml");
-    std::fs::write(&base_toml, slcan_base_toml(&can, "cia402", "{ id = 1 }, { id = 2 }, { id = 3 }", (8.0, 8.0), ""))
-        .unwrap();
+    let (mock, base_toml) = cia402_drives(dir.path(), (8.0, 8.0)).await;
 
     let port = free_port();
     let hash = starc_link::ros2::type_hash::rihs01("geometry_msgs/msg/Twist").unwrap();

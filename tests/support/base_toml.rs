@@ -34,3 +34,22 @@ wheels = [{ids}]
         accel.1
     )
 }
+
+/// Three mock CiA 402 drives (ids 1-3) behind slcan on a pty at `dir/can`, and `dir/base.toml`,
+/// which drives them with acceleration limits `accel` (m/s^2, rad/s^2).
+#[allow(dead_code)] // not every test that includes this file starts drives
+pub async fn cia402_drives(dir: &Path, accel: (f64, f64)) -> (starc_hil::motors::MockMotors, std::path::PathBuf) {
+    use starc_hil::motors::{MockMotors, MockMotorsConfig, MockProtocol};
+    let can = dir.join("can");
+    let config = MockMotorsConfig {
+        protocol: MockProtocol::Cia402,
+        port: can.clone(),
+        ids: vec![1, 2, 3],
+        ..Default::default()
+    };
+    let mock = MockMotors::spawn(config).await.unwrap_or_else(|e| panic!("mock drives: {e}"));
+    let base_toml = dir.join("base.toml");
+    std::fs::write(&base_toml, slcan_base_toml(&can, "cia402", "{ id = 1 }, { id = 2 }, { id = 3 }", accel, ""))
+        .unwrap_or_else(|e| panic!("{e}"));
+    (mock, base_toml)
+}
