@@ -151,8 +151,9 @@ pub struct PoseErrorReport {
 pub struct ExplorationReport {
     /// Which route: "scripted" (the scenario's waypoints) or "explorer" (`starc sim --explore`).
     pub route: &'static str,
-    /// The closed loop's own report (`starc_eval::explore_loop::LoopReport`, as the run's
-    /// exploration.json holds it) when the explorer drove.
+    /// The loop's own report (`starc_eval::explore_loop::LoopReport`, as the run's
+    /// exploration.json holds it): the explorer's (`starc sim --explore`), or the scripted
+    /// route's measured the same way (`--measure-route`).
     pub closed_loop: Option<serde_json::Value>,
     /// At the end (NaN, written null, without a grid).
     pub area_m2: f64,

@@ -154,7 +154,10 @@ impl Scorer {
     fn exploration(&self) -> ExplorationReport {
         let first = self.truth.gt_robot.first().map_or(0, |g| g.0);
         ExplorationReport {
-            route: if self.truth.explored.is_some() { "explorer" } else { "scripted" },
+            route: match self.truth.explored.as_ref().and_then(|e| e.get("mode")).and_then(|m| m.as_str()) {
+                Some("closed_loop") => "explorer",
+                _ => "scripted",
+            },
             closed_loop: self.truth.explored.clone(),
             area_m2: self.explored.last().map_or(f64::NAN, |e| e.1),
             area_by_time: self.explored.iter().map(|&(t, a)| [t.saturating_sub(first) as f64 * 1e-9, a]).collect(),

@@ -100,11 +100,22 @@ fn summarise(rows: &[Building]) {
     );
 }
 
-/// What a closed-loop run (`starc sim --explore`) came to, in a few lines.
+/// What a loop run (`starc sim --explore` or `--measure-route`) came to, in a few lines.
 pub fn print_loop(r: &starc_eval::explore_loop::LoopReport) {
+    let coverage = r.coverage.last().map_or(0.0, |c| c.1 * 100.0);
     println!(
-        "  explorer: {:.1} m² of floor known, {:.1} m driven, {}, {} goal(s) given up; contacts {} ({} checks of 50 ms); control step p50 {:.2} ms, p99 {:.2} ms, max {:.1} ms",
+        "  {}: {:.1} m² of floor known, {coverage:.0} % of the {:.1} m² reachable{}",
+        if r.mode == "scripted" { "scripted route" } else { "explorer" },
         r.final_area_m2,
+        r.reachable_m2,
+        r.coverage_95_s.map_or(String::new(), |t| format!(" (95 % at {t:.0} s)")),
+    );
+    if r.mode == "scripted" {
+        println!("  {:.1} m driven; contacts {} ({} checks of 50 ms)", r.distance_m, r.contacts, r.contact_periods);
+        return;
+    }
+    println!(
+        "  {:.1} m driven, {}, {} goal(s) given up; contacts {} ({} checks of 50 ms); control step p50 {:.2} ms, p99 {:.2} ms, max {:.1} ms",
         r.distance_m,
         r.done_s.map_or("still exploring at the end".to_string(), |t| format!("home and done at {t:.1} s")),
         r.blacklisted,

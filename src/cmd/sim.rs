@@ -75,11 +75,16 @@ pub struct Args {
     /// to the mock motor controllers, and the robot moves as its motors turn
     /// (docs/explore.md). Writes DIR/exploration.json, which the mission's report.json
     /// carries under `exploration.closed_loop`.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "measure_route")]
     explore: bool,
+    /// The robot follows its scripted waypoints, measured as --explore measures the explorer
+    /// (its LIO in the loop, the same grid, the reachable floor's coverage, contacts), into
+    /// DIR/exploration.json: the baseline to compare the explorer with.
+    #[arg(long)]
+    measure_route: bool,
     /// With --explore: the base driver's settings (config/base.toml's form); its kinematics,
     /// protocol and wheel ids are set to the simulated base's. Default: the shipped file.
-    #[arg(long, requires = "explore")]
+    #[arg(long)]
     base_config: Option<PathBuf>,
     #[command(flatten)]
     detector: super::detector_arg::DetectorArgs,
@@ -90,7 +95,8 @@ const BASE_TOML: &str = include_str!("../../config/base.toml");
 
 /// The closed loop `--explore` asks for, or none.
 fn explore_loop(args: &Args, scenario: &Scenario) -> anyhow::Result<Option<ExploreLoop>> {
-    if !args.explore {
+    if !(args.explore || args.measure_route) {
+        anyhow::ensure!(args.base_config.is_none(), "--base-config is for --explore");
         return Ok(None);
     }
     let text = match &args.base_config {
@@ -98,7 +104,10 @@ fn explore_loop(args: &Args, scenario: &Scenario) -> anyhow::Result<Option<Explo
         None => BASE_TOML.to_string(),
     };
     let template = starc_base::BaseConfig::from_toml(&text).context("--base-config")?;
-    let cfg = LoopConfig::for_robot(scenario.robot.get_ref(), template, args.seed);
+    let cfg = LoopConfig {
+        scripted: args.measure_route,
+        ..LoopConfig::for_robot(scenario.robot.get_ref(), template, args.seed)
+    };
     Ok(Some(ExploreLoop::new(scenario, cfg)?))
 }
 

@@ -15,17 +15,18 @@
 //! The scorer's part ([`score`]) reads the simulator's world and the true track to count
 //! contacts; nothing the robot decides reads them.
 
+mod body;
 pub mod bus;
+mod reach;
 mod score;
 
 use crate::{EvalError, Result};
-use bus::{BaseInTheLoop, BusCounts, STEP_NS};
+use body::{Body, SCRIPTED_WHEEL_NS};
+use bus::{BusCounts, STEP_NS};
 use nalgebra::Vector3;
 use starc_base::config::{Protocol, WheelConfig};
-use starc_base::kinematics::Kinematics;
 use starc_base::{BaseConfig, Twist};
 use starc_bridge::livox::{lio_scan, packet_imu};
-use starc_bridge::wheels::{WheelDecoder, WheelFeedback};
 use starc_hil::error::HilError;
 use starc_hil::sim::driven::DrivenTrack;
 use starc_hil::sim::lan::{AviaLink, Wire};
@@ -34,7 +35,7 @@ use starc_hil::sim::scenario::{MotorProtocol, Robot, Scenario};
 use starc_livox::data::DataPacket;
 use starc_livox::ports::DEVICE_CMD_PORT;
 use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::explore::{ExploreConfig, ExploreState, Pilot, PilotConfig};
+use starc_pipeline::explore::{ExploreConfig, ExploreState, Pilot, PilotConfig, Pose2};
 use starc_pipeline::lio::{Clock, WheelSample};
 use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotStep};
 use std::time::Instant;
@@ -61,6 +62,8 @@ pub struct LoopConfig {
     pub control_hz: f64,
     pub robot: RobotCoreConfig,
     pub seed: u64,
+    /// The robot follows its scripted waypoints instead, measured the same way (the baseline).
+    pub scripted: bool,
 }
 
 impl LoopConfig {
@@ -79,6 +82,7 @@ impl LoopConfig {
             control_hz: CONTROL_HZ,
             robot: RobotCoreConfig::default(),
             seed,
+            scripted: false,
         }
     }
 }
@@ -100,93 +104,129 @@ pub fn sim_base_config(robot: &Robot, mut template: BaseConfig) -> BaseConfig {
 /// See the module's documentation.
 pub struct ExploreLoop {
     cfg: LoopConfig,
-    track: DrivenTrack,
-    bus: BaseInTheLoop,
-    kinematics: Kinematics,
-    /// The next motor step (simulator clock).
-    motor_ns: u64,
-    next_control_ns: u64,
-    wheels: WheelDecoder,
+    body: Body,
     core: RobotCore,
     assembler: ScanAssembler,
     pilot: Pilot,
     steps: Vec<RobotStep>,
-    frames: Vec<starc_can::CanFrame>,
     score: score::Score,
 }
 
 impl ExploreLoop {
-    /// The loop for `scenario`'s robot, starting where its first waypoint puts it.
+    /// The loop for `scenario`'s robot, starting where its first waypoint puts it: driven by
+    /// the explorer, or with `cfg.scripted` along its waypoints, measured the same way.
     pub fn new(scenario: &Scenario, cfg: LoopConfig) -> Result<Self> {
         let robot = scenario.robot.get_ref();
         let start = robot.waypoints.first().ok_or_else(|| EvalError::Input("the robot has no start pose".into()))?;
-        let kinematics = Kinematics::new(&cfg.base.kinematics).map_err(|e| EvalError::Input(format!("base: {e}")))?;
-        let wheels = WheelDecoder::new(&WheelFeedback::from_base(&cfg.base)).map_err(EvalError::Input)?;
+        let body = match cfg.scripted {
+            true => Body::scripted(robot, cfg.seed)?,
+            false => Body::driven(robot, &cfg.base, cfg.seed)?,
+        };
         let assembler = ScanAssembler::new(ScanConfig::default()).map_err(|e| EvalError::Input(e.to_string()))?;
         Ok(Self {
-            track: DrivenTrack::new([start[0], start[1], start[2].to_radians()], 0.0, STEP_NS as f64 * 1e-9),
-            bus: BaseInTheLoop::new(cfg.base.clone(), cfg.seed)?,
-            kinematics,
-            motor_ns: 0,
-            next_control_ns: 0,
-            wheels,
+            body,
             core: RobotCore::new(cfg.robot.clone()).map_err(|e| EvalError::Input(e.to_string()))?,
             assembler,
             pilot: Pilot::new(cfg.pilot),
             steps: Vec::new(),
-            frames: Vec::new(),
-            score: score::Score::new(scenario, cfg.pilot.explore.control.robot_radius_m),
+            score: score::Score::new(scenario, cfg.pilot.explore.control.robot_radius_m, [start[0], start[1]]),
             cfg,
         })
     }
 
     /// What the run came to, once the simulator is done.
     pub fn report(&self) -> LoopReport {
-        self.score.report(self.pilot.explorer(), self.bus.counts(), self.bus.status().faults.len())
+        match &self.body {
+            Body::Driven(d) => {
+                self.score.report("closed_loop", self.pilot.explorer(), d.bus.counts(), d.bus.status().faults.len())
+            }
+            Body::Scripted(_) => self.score.report("scripted", self.pilot.explorer(), BusCounts::default(), 0),
+        }
     }
 
-    /// The bus's counters so far.
-    pub fn bus_counts(&self) -> BusCounts {
-        self.bus.counts()
+    /// A wheel twist measured at `t_ns` (PTP), to the LIO and the pilot.
+    fn wheel(&mut self, t_ns: u64, [vx_m_s, vy_m_s, wz_rad_s]: [f64; 3]) {
+        self.core.push_wheel(WheelSample { t_ns, clock: Clock::Ptp, vx_m_s, vy_m_s, wz_rad_s });
+        self.pilot.on_wheels(t_ns, vx_m_s, vy_m_s, wz_rad_s);
     }
 
     /// One motor step at `sim_ns`: the bus, the wheels' odometry, a control step when due, and
     /// the track moved by the wheels' true speeds.
     fn motor_step(&mut self, sim_ns: u64) {
+        let Body::Driven(d) = &mut self.body else { return };
         let ptp_ns = sim_ns.saturating_add_signed(AviaLink::ptp_offset_ns());
-        self.frames.clear();
-        self.bus.step(sim_ns, ptp_ns, &mut self.frames);
-        for f in &self.frames {
-            if let Some(tw) = self.wheels.push(ptp_ns, f) {
-                let s = WheelSample {
-                    t_ns: tw.t_ns,
-                    clock: Clock::Ptp,
-                    vx_m_s: tw.vx_m_s,
-                    vy_m_s: tw.vy_m_s,
-                    wz_rad_s: tw.wz_rad_s,
-                };
-                self.core.push_wheel(s);
-                self.pilot.on_wheels(tw.t_ns, tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s);
+        d.frames.clear();
+        d.bus.step(sim_ns, ptp_ns, &mut d.frames);
+        let twists: Vec<_> = d.frames.iter().filter_map(|f| d.wheels.push(ptp_ns, f)).collect();
+        let control = sim_ns >= d.next_control_ns;
+        let dt_s = 1.0 / self.cfg.control_hz;
+        if control {
+            d.next_control_ns = sim_ns + (dt_s * 1e9) as u64;
+        }
+        for tw in twists {
+            self.wheel(tw.t_ns, [tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s]);
+        }
+        let t0 = Instant::now();
+        let step = if control { self.pilot.step(ptp_ns, dt_s) } else { None };
+        let Body::Driven(d) = &mut self.body else { return };
+        if let Some(step) = step {
+            self.score.control_step(t0.elapsed().as_secs_f64() * 1e3, step.state == ExploreState::Done);
+            let tw = step.twist;
+            d.bus.command(Twist::new(tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s), ptp_ns);
+        }
+        let body = d.kinematics.body_twist(&d.bus.true_wheel_rad_s()).unwrap_or(Twist::ZERO);
+        d.track.push([body.vx_m_s, body.vy_m_s, body.wz_rad_s]);
+    }
+
+    /// Up to the step at `t_ns`: the motors (driven: 20 ms ahead), or the scripted route's
+    /// wheel odometry (every 10 ms, up to `t_ns`).
+    fn advance(&mut self, t_ns: u64) -> starc_hil::error::Result<()> {
+        match &mut self.body {
+            Body::Driven(_) => {
+                while let Body::Driven(d) = &mut self.body {
+                    if d.motor_ns > t_ns + LOOKAHEAD_NS {
+                        break;
+                    }
+                    let at = d.motor_ns;
+                    d.motor_ns += STEP_NS;
+                    self.motor_step(at);
+                }
+                if let Body::Driven(d) = &self.body {
+                    if d.track.end_s() * 1e9 < (t_ns + 2_000_000) as f64 {
+                        return Err(HilError::Driver(format!("the track ends before {} ns", t_ns + 2_000_000)));
+                    }
+                }
+            }
+            Body::Scripted(s) => {
+                let mut measured = Vec::new();
+                while s.next_ns <= t_ns {
+                    let r = s.odometry.sample(&s.motion, s.next_ns as f64 * 1e-9);
+                    measured.push((s.next_ns.saturating_add_signed(AviaLink::ptp_offset_ns()), r.body));
+                    s.next_ns += SCRIPTED_WHEEL_NS;
+                }
+                for (t, body) in measured {
+                    self.wheel(t, body);
+                }
             }
         }
-        if sim_ns >= self.next_control_ns {
-            let dt_s = 1.0 / self.cfg.control_hz;
-            self.next_control_ns = sim_ns + (dt_s * 1e9) as u64;
-            let t0 = Instant::now();
-            if let Some(step) = self.pilot.step(ptp_ns, dt_s) {
-                self.score.control_step(t0.elapsed().as_secs_f64() * 1e3, step.state == ExploreState::Done);
-                let tw = step.twist;
-                self.bus.command(Twist::new(tw.vx_m_s, tw.vy_m_s, tw.wz_rad_s), ptp_ns);
-            }
-        }
-        let body = self.kinematics.body_twist(&self.bus.true_wheel_rad_s()).unwrap_or(Twist::ZERO);
-        self.track.push([body.vx_m_s, body.vy_m_s, body.wz_rad_s]);
+        Ok(())
     }
 
     /// The robot's LIO outputs since the last call: each placed scan to the pilot.
     fn take_steps(&mut self) {
         let placed = self.core.take_unmapped();
         for (step, scan) in self.steps.drain(..).zip(placed) {
+            // The scorer ties the grid to the world at the first pose (the truth is its alone).
+            let o = &step.output;
+            let sim_s = o.end_ns.saturating_add_signed(-AviaLink::ptp_offset_ns()) as f64 * 1e-9;
+            let truth = self.body.truth_at(sim_s);
+            let x_axis = o.lidar_pose.rotation * Vector3::x();
+            let lio = Pose2 {
+                x_m: o.lidar_pose.translation.x,
+                y_m: o.lidar_pose.translation.y,
+                yaw_rad: x_axis.y.atan2(x_axis.x),
+            };
+            self.score.tie(&lio, &Pose2 { x_m: truth.x, y_m: truth.y, yaw_rad: truth.yaw_rad });
             let points: Vec<Vector3<f64>> = scan.points.iter().map(|p| p.xyz()).collect();
             self.pilot.on_scan(step.output.end_ns, &step.output.lidar_pose, &points);
         }
@@ -194,8 +234,8 @@ impl ExploreLoop {
 }
 
 impl RobotDriver for ExploreLoop {
-    fn track(&self) -> DrivenTrack {
-        self.track.clone()
+    fn track(&self) -> Option<DrivenTrack> {
+        self.body.track()
     }
 
     fn on_wire(&mut self, w: &Wire<'_>) -> starc_hil::error::Result<()> {
@@ -217,14 +257,9 @@ impl RobotDriver for ExploreLoop {
     }
 
     fn before_step(&mut self, t_ns: u64) -> starc_hil::error::Result<()> {
-        while self.motor_ns <= t_ns + LOOKAHEAD_NS {
-            self.motor_step(self.motor_ns);
-            self.motor_ns += STEP_NS;
-        }
-        self.score.sample(&self.track, self.pilot.explorer(), t_ns);
-        if self.track.end_s() * 1e9 < (t_ns + 2_000_000) as f64 {
-            return Err(HilError::Driver(format!("the track ends before {} ns", t_ns + 2_000_000)));
-        }
+        self.advance(t_ns)?;
+        let truth = self.body.truth_at(t_ns as f64 * 1e-9);
+        self.score.sample(&truth, self.pilot.explorer(), t_ns);
         Ok(())
     }
 }

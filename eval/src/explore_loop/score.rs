@@ -1,11 +1,13 @@
 //! The scorer of a closed-loop run: contacts of the base with the world (from the true track),
-//! the floor the explorer has come to know over time, its planning time, the bus's counters.
+//! the floor the explorer has come to know over time and its share of the floor the base could
+//! reach ([`Reachable`]), its planning time, the bus's counters.
 //! It reads the simulator's truth; the loop's decisions never see what it computes.
 
 use super::bus::BusCounts;
+use super::reach::Reachable;
 use crate::{quantiles, Quantiles};
 use nalgebra::Vector3;
-use starc_hil::sim::driven::DrivenTrack;
+use starc_hil::sim::motion::RouteState;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
 use starc_pipeline::explore::{Explorer, Pose2};
@@ -19,11 +21,19 @@ const AREA_EVERY_NS: u64 = 1_000_000_000;
 /// `exploration.closed_loop`.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct LoopReport {
-    /// "closed_loop": the explorer drove the simulated base over CAN on its LIO's poses.
+    /// "closed_loop": the explorer drove the simulated base over CAN on its LIO's poses;
+    /// "scripted": the robot followed its waypoints, its grid built the same way.
     pub mode: &'static str,
     /// Traversable floor the explorer's grid knows (m²), each second of simulator time.
     pub timeline: Vec<(f64, f64)>,
     pub final_area_m2: f64,
+    /// The floor the base could reach from its start (m², the simulator's truth: 0.1 m cells
+    /// its disc fits in, flooded from the start), and the share of it the explorer's grid
+    /// knows as traversable each second (from the LIO's first pose on), and when that share
+    /// first reached 95 % (null: never).
+    pub reachable_m2: f64,
+    pub coverage: Vec<(f64, f64)>,
+    pub coverage_95_s: Option<f64>,
     /// When the explorer was back home with nothing left (simulator time), if it was.
     pub done_s: Option<f64>,
     /// Checks (every 50 ms) in which the base's disc touched a surface or a person, and the
@@ -70,6 +80,10 @@ fn contact(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> Option<(u16,
 
 pub(super) struct Score {
     world: World,
+    reach: Reachable,
+    /// Where the explorer's grid (the LIO's world) lies in the simulator's.
+    world_from_grid: Option<[f64; 3]>,
+    coverage: Vec<(f64, f64)>,
     radius_m: f64,
     next_contact_ns: u64,
     next_area_ns: u64,
@@ -85,9 +99,14 @@ pub(super) struct Score {
 }
 
 impl Score {
-    pub(super) fn new(scenario: &Scenario, radius_m: f64) -> Self {
+    pub(super) fn new(scenario: &Scenario, radius_m: f64, start: [f64; 2]) -> Self {
+        let world = World::new(scenario);
+        let reach = Reachable::from_truth(scenario, &world, start, radius_m, 0.0);
         Self {
-            world: World::new(scenario),
+            world,
+            reach,
+            world_from_grid: None,
+            coverage: Vec::new(),
             radius_m,
             next_contact_ns: 0,
             next_area_ns: 0,
@@ -103,13 +122,12 @@ impl Score {
         }
     }
 
-    /// At simulator time `t_ns`: contacts and distance from the true track, the known floor.
-    pub(super) fn sample(&mut self, track: &DrivenTrack, explorer: Option<&Explorer>, t_ns: u64) {
+    /// At simulator time `t_ns`, the base truly at `s`: contacts and distance, the known floor.
+    pub(super) fn sample(&mut self, s: &RouteState, explorer: Option<&Explorer>, t_ns: u64) {
         self.now_ns = t_ns;
         if t_ns >= self.next_contact_ns {
             self.next_contact_ns = t_ns + CONTACT_EVERY_NS;
             let t_s = t_ns as f64 * 1e-9;
-            let s = track.at(t_s);
             let pose = Pose2 { x_m: s.x, y_m: s.y, yaw_rad: s.yaw_rad };
             if let Some([x, y]) = self.last_xy {
                 self.distance_m += (s.x - x).hypot(s.y - y);
@@ -128,7 +146,22 @@ impl Score {
             self.next_area_ns = t_ns + AREA_EVERY_NS;
             let area = explorer.map_or(0.0, |e| e.grid().traversable_area_m2());
             self.timeline.push((t_ns as f64 * 1e-9, area));
+            if let (Some(e), Some(tie)) = (explorer, self.world_from_grid) {
+                self.coverage.push((t_ns as f64 * 1e-9, self.reach.coverage(e.grid(), tie)));
+            }
         }
+    }
+
+    /// The LIO's first pose of the base and the true one at the same instant: they tie the
+    /// explorer's grid to the world.
+    pub(super) fn tie(&mut self, lio: &Pose2, truth: &Pose2) {
+        if self.world_from_grid.is_some() {
+            return;
+        }
+        let yaw = truth.yaw_rad - lio.yaw_rad;
+        let (s, c) = yaw.sin_cos();
+        let (x, y) = (truth.x_m - (c * lio.x_m - s * lio.y_m), truth.y_m - (s * lio.x_m + c * lio.y_m));
+        self.world_from_grid = Some([x, y, yaw]);
     }
 
     /// One control step that took `ms`; `done` when the explorer is back home with nothing left.
@@ -139,11 +172,20 @@ impl Score {
         }
     }
 
-    pub(super) fn report(&self, explorer: Option<&Explorer>, bus: BusCounts, base_faults: usize) -> LoopReport {
+    pub(super) fn report(
+        &self,
+        mode: &'static str,
+        explorer: Option<&Explorer>,
+        bus: BusCounts,
+        base_faults: usize,
+    ) -> LoopReport {
         LoopReport {
-            mode: "closed_loop",
+            mode,
             timeline: self.timeline.clone(),
             final_area_m2: explorer.map_or(0.0, |e| e.grid().traversable_area_m2()),
+            reachable_m2: self.reach.area_m2(),
+            coverage: self.coverage.clone(),
+            coverage_95_s: self.coverage.iter().find(|c| c.1 >= 0.95).map(|c| c.0),
             done_s: self.done_s,
             contact_periods: self.contact_periods,
             contacts: self.contact_log.len(),

@@ -255,7 +255,8 @@ fn ptp_ns(t_ns: u64) -> u64 {
 /// reading it (the LiDAR, both IMUs, the wheels) always find it known.
 pub trait RobotDriver {
     /// The track the robot moves along; the simulator reads it, the driver appends to it.
-    fn track(&self) -> DrivenTrack;
+    /// None: the robot follows its waypoints, and the driver only watches.
+    fn track(&self) -> Option<DrivenTrack>;
     /// One datagram on the robot's Avia network (both ways), at simulator time `w.time_ns`.
     fn on_wire(&mut self, w: &Wire<'_>) -> Result<()>;
     /// Before the step at simulator time `t_ns`, when the steps before it have been seen: the
@@ -274,8 +275,8 @@ pub fn run(
     run_driven(scenario, scenario_text, opts, None, progress)
 }
 
-/// [`run`], with the robot driven by `driver` when one is given (its waypoints past the first
-/// are then ignored).
+/// [`run`], with `driver` beside the robot when one is given: it drives the robot when it has a
+/// track (its waypoints past the first are then ignored), and sees its Avia's traffic.
 pub fn run_driven<'d>(
     scenario: &Scenario,
     scenario_text: &str,
@@ -290,7 +291,7 @@ pub fn run_driven<'d>(
     let out = &opts.out;
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
     std::fs::write(out.join("scenario.toml"), scenario_text).map_err(|e| out_err(&out.join("scenario.toml"), e))?;
-    let track = driver.as_ref().map(|d| d.track());
+    let track = driver.as_ref().and_then(|d| d.track());
     let mut sim = Sim::new(scenario, opts, track)?;
     let end_ns = secs_ns(duration_s);
     let wall_start = Instant::now();
