@@ -1,6 +1,7 @@
 //! The floor the robot could reach, from the simulator's truth (the scorer's alone): 0.1 m
 //! cells over the scenario's floors where the base's disc touches nothing (the contact check's
-//! rays), flooded 8-connected from where the robot starts. Coverage is the share of it the
+//! rays), flooded 8-connected from where the robot starts (near the start, with the room the
+//! start has: a scripted start may lie closer than the disc's radius to something). Coverage is the share of it the
 //! explorer's grid knows as traversable, the grid's cells moved into the world by the LIO's
 //! first pose against the truth's.
 
@@ -10,6 +11,9 @@ use starc_pipeline::explore::OccupancyGrid;
 use std::collections::VecDeque;
 
 const CELL_M: f64 = 0.1;
+/// How far from its start a robot put down in a tight spot may move with less room than its
+/// radius (m).
+const START_M: f64 = 0.5;
 
 /// The reachable floor as a grid over the scenario's floors.
 pub struct Reachable {
@@ -42,15 +46,26 @@ impl Reachable {
             })
         };
         let bodies = world.bodies_at(t_s);
-        let clear = |x: f64, y: f64| {
+        let clear_by = |x: f64, y: f64, r: f64| {
             on_floor(x, y)
                 && [0.1, 0.5, 1.0].into_iter().all(|z| {
                     (0..16).all(|k| {
                         let a = f64::from(k) * std::f64::consts::TAU / 16.0;
                         let (o, d) = (nalgebra::Vector3::new(x, y, z), nalgebra::Vector3::new(a.cos(), a.sin(), 0.0));
-                        world.cast(&o, &d, radius_m, &bodies).is_none()
+                        world.cast(&o, &d, r, &bodies).is_none()
                     })
                 })
+        };
+        // A robot put down nearer than its radius to something drives out of there: within
+        // START_M of the start, the widest disc that fits at the start is enough.
+        let start_r = [1.0, 0.8, 0.6, 0.4, 0.2, 0.0]
+            .into_iter()
+            .map(|f| f * radius_m)
+            .find(|&r| clear_by(start[0], start[1], r))
+            .unwrap_or(0.0);
+        let clear = |x: f64, y: f64| {
+            let near_start = (x - start[0]).hypot(y - start[1]) <= START_M;
+            clear_by(x, y, radius_m) || (near_start && clear_by(x, y, start_r))
         };
         let Some(first) = me.index_of(start[0], start[1]) else { return me };
         let mut seen = vec![false; nx * ny];
@@ -60,7 +75,7 @@ impl Reachable {
         }
         while let Some(k) = queue.pop_front() {
             let [x, y] = me.centre(k);
-            if !clear(x, y) {
+            if k != first && !clear(x, y) {
                 continue;
             }
             if let Some(c) = me.cells.get_mut(k) {
@@ -148,6 +163,11 @@ mod tests {
             .sum();
         let area = r.area_m2();
         assert!(area > 5.0 && area < floor, "{area} of {floor} m²");
+        // Put down right beside the wall along y = 0, closer than the disc: the rooms are
+        // reached all the same (and a little more floor beside the start), nothing past the wall.
+        let near = Reachable::from_truth(&scenario, &world, [start[0], 0.2], 0.3, 0.0);
+        assert!(near.area_m2() > area - 0.5 && near.area_m2() < area + 5.0, "{} against {area}", near.area_m2());
+        assert!(near.contains(start[0], 0.2) && !near.contains(start[0], -0.5));
         // An empty grid covers nothing; one that knows everything around covers all of it.
         let mut grid = OccupancyGrid::new(Default::default(), [start[0], start[1]]).unwrap();
         assert_eq!(r.coverage(&grid, [0.0, 0.0, 0.0]), 0.0);
