@@ -115,14 +115,16 @@ mod tests {
             track.push([0.4, 0.0, 0.5]);
         }
         assert!((track.end_s() - 5.0).abs() < 1e-9);
-        // A circle of radius 0.8 m: heading 0.5 + 0.5 t, centre to the left of the start.
+        // A circle of radius 0.8 m: heading 0.5 + 0.5 t, centre to the left of the start. The
+        // track starts at rest, so the first millisecond lags by half a step (0.2 mm).
         let centre = (1.0 - 0.8 * 0.5f64.sin(), 2.0 + 0.8 * 0.5f64.cos());
         for t in [3.0, 3.2345, 4.0005, 4.9999] {
             let p = track.at(t);
             let yaw = 0.5 + 0.5 * (t - 3.0);
             let want = (centre.0 + 0.8 * yaw.sin(), centre.1 - 0.8 * yaw.cos());
-            assert!((p.x - want.0).abs() < 1e-6 && (p.y - want.1).abs() < 1e-6, "{t}: {p:?} {want:?}");
-            assert!((p.yaw_rad - yaw).abs() < 1e-9 && (p.speed_m_s - 0.4).abs() < 1e-6, "{p:?}");
+            assert!((p.x - want.0).abs() < 3e-4 && (p.y - want.1).abs() < 3e-4, "{t}: {p:?} {want:?}");
+            let speed = if t > 3.001 { 0.4 } else { 0.0 };
+            assert!((p.yaw_rad - yaw).abs() < 1e-9 && (p.speed_m_s - speed).abs() < 1e-6, "{p:?}");
         }
         // Before the start it stands; past the last knot it holds there.
         assert_eq!((track.at(0.0).x, track.at(0.0).speed_m_s), (1.0, 0.0));
