@@ -44,7 +44,7 @@ async fn the_explorer_drives_the_base_and_teleop_takes_over() {
     // Before any scan there is nothing to drive on: nothing is sent.
     x.control(starc_link::host_now_ns(), None).await.unwrap();
     let lidar = Isometry3::from_parts(Translation3::new(1.0, 2.0, 0.5), Default::default());
-    x.on_scan(1_000_000_000, &lidar, &room());
+    x.on_scan(1_000_000_000, &lidar, room());
 
     // The first sweep: a turn in place, every wheel the same way round.
     let mut lidar_ns = 1_000_000_000u64;

@@ -7,6 +7,7 @@
 
 use nalgebra::Vector3;
 use starc_hil::rng::{hash2, SplitMix64};
+use starc_hil::sim::human::Body;
 use starc_hil::sim::motion::RobotMotion;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
@@ -88,16 +89,21 @@ pub fn scan(
     (origin, points)
 }
 
-/// Whether the base's disc of `radius_m` at `pose` touches anything: horizontal rays in 16
-/// directions at three heights.
+/// Whether the base's disc of `radius_m` at `pose` touches anything ([`disc_hit`]).
 pub fn touches(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> bool {
-    let bodies = world.bodies_at(t_s);
-    (0..16).any(|k| {
-        let a = f64::from(k) * std::f64::consts::TAU / 16.0;
-        let d = Vector3::new(a.cos(), a.sin(), 0.0);
-        [0.1, 0.5, 1.0]
-            .iter()
-            .any(|&z| world.cast(&Vector3::new(pose.x_m, pose.y_m, z), &d, radius_m, &bodies).is_some())
+    disc_hit(world, &world.bodies_at(t_s), [pose.x_m, pose.y_m], radius_m).is_some()
+}
+
+/// What a disc of `radius_m` centred at (x, y) on the floor touches, people as `bodies`:
+/// horizontal rays in 16 directions at 0.1, 0.5 and 1.0 m; the label hit (0 the building, k
+/// person k) and the lowest height it was hit at. The scorer's one notion of the base's body.
+pub fn disc_hit(world: &World, bodies: &[Body], [x, y]: [f64; 2], radius_m: f64) -> Option<(u16, f64)> {
+    [0.1, 0.5, 1.0].into_iter().find_map(|z| {
+        (0..16).find_map(|k| {
+            let a = f64::from(k) * std::f64::consts::TAU / 16.0;
+            let d = Vector3::new(a.cos(), a.sin(), 0.0);
+            world.cast(&Vector3::new(x, y, z), &d, radius_m, bodies).map(|h| (h.label, z))
+        })
     })
 }
 

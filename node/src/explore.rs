@@ -200,7 +200,12 @@ impl ExploreDrive {
     }
 
     /// A placed scan (LiDAR clock).
-    pub fn on_scan(&mut self, end_ns: u64, lidar_pose: &nalgebra::Isometry3<f64>, points: &[nalgebra::Vector3<f64>]) {
+    pub fn on_scan(
+        &mut self,
+        end_ns: u64,
+        lidar_pose: &nalgebra::Isometry3<f64>,
+        points: impl IntoIterator<Item = nalgebra::Vector3<f64>>,
+    ) {
         self.pilot.on_scan(end_ns, lidar_pose, points);
     }
 

@@ -227,8 +227,7 @@ pub async fn run(
                 // After the poses and detections are out: the explorer's grid takes a few ms.
                 if let Some(x) = explore.as_mut() {
                     for ((end_ns, pose), scan) in placed_at.iter().zip(&placed) {
-                        let points: Vec<nalgebra::Vector3<f64>> = scan.points.iter().map(|p| p.xyz()).collect();
-                        x.on_scan(*end_ns, pose, &points);
+                        x.on_scan(*end_ns, pose, scan.points.iter().map(|p| p.xyz()));
                     }
                 }
                 for scan in placed {

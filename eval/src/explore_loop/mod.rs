@@ -23,7 +23,6 @@ mod score;
 use crate::{EvalError, Result};
 use body::{Body, SCRIPTED_WHEEL_NS};
 use bus::{BusCounts, STEP_NS};
-use nalgebra::Vector3;
 use starc_base::config::{Protocol, WheelConfig};
 use starc_base::{BaseConfig, Twist};
 use starc_bridge::livox::{lio_scan, packet_imu};
@@ -35,7 +34,7 @@ use starc_hil::sim::scenario::{MotorProtocol, Robot, Scenario};
 use starc_livox::data::DataPacket;
 use starc_livox::ports::DEVICE_CMD_PORT;
 use starc_livox::scan::{ScanAssembler, ScanConfig};
-use starc_pipeline::explore::{ExploreConfig, ExploreState, Pilot, PilotConfig, Pose2};
+use starc_pipeline::explore::{base_pose, ExploreConfig, ExploreState, Pilot, PilotConfig, Pose2};
 use starc_pipeline::lio::{Clock, WheelSample};
 use starc_pipeline::mission::{RobotCore, RobotCoreConfig, RobotStep};
 use std::time::Instant;
@@ -220,15 +219,9 @@ impl ExploreLoop {
             let o = &step.output;
             let sim_s = o.end_ns.saturating_add_signed(-AviaLink::ptp_offset_ns()) as f64 * 1e-9;
             let truth = self.body.truth_at(sim_s);
-            let x_axis = o.lidar_pose.rotation * Vector3::x();
-            let lio = Pose2 {
-                x_m: o.lidar_pose.translation.x,
-                y_m: o.lidar_pose.translation.y,
-                yaw_rad: x_axis.y.atan2(x_axis.x),
-            };
+            let lio = base_pose(&o.lidar_pose);
             self.score.tie(&lio, &Pose2 { x_m: truth.x, y_m: truth.y, yaw_rad: truth.yaw_rad });
-            let points: Vec<Vector3<f64>> = scan.points.iter().map(|p| p.xyz()).collect();
-            self.pilot.on_scan(step.output.end_ns, &step.output.lidar_pose, &points);
+            self.pilot.on_scan(o.end_ns, &o.lidar_pose, scan.points.iter().map(|p| p.xyz()));
         }
     }
 }

@@ -5,6 +5,7 @@
 //! explorer's grid knows as traversable, the grid's cells moved into the world by the LIO's
 //! first pose against the truth's.
 
+use crate::explore_sim::disc_hit;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
 use starc_pipeline::explore::OccupancyGrid;
@@ -46,16 +47,7 @@ impl Reachable {
             })
         };
         let bodies = world.bodies_at(t_s);
-        let clear_by = |x: f64, y: f64, r: f64| {
-            on_floor(x, y)
-                && [0.1, 0.5, 1.0].into_iter().all(|z| {
-                    (0..16).all(|k| {
-                        let a = f64::from(k) * std::f64::consts::TAU / 16.0;
-                        let (o, d) = (nalgebra::Vector3::new(x, y, z), nalgebra::Vector3::new(a.cos(), a.sin(), 0.0));
-                        world.cast(&o, &d, r, &bodies).is_none()
-                    })
-                })
-        };
+        let clear_by = |x: f64, y: f64, r: f64| on_floor(x, y) && disc_hit(world, &bodies, [x, y], r).is_none();
         // A robot put down nearer than its radius to something drives out of there: within
         // START_M of the start, the widest disc that fits at the start is enough.
         let start_r = [1.0, 0.8, 0.6, 0.4, 0.2, 0.0]

@@ -5,12 +5,12 @@
 
 use super::bus::BusCounts;
 use super::reach::Reachable;
+use crate::explore_sim::disc_hit;
 use crate::{quantiles, Quantiles};
-use nalgebra::Vector3;
 use starc_hil::sim::motion::RouteState;
 use starc_hil::sim::scenario::Scenario;
 use starc_hil::sim::world::World;
-use starc_pipeline::explore::{Explorer, Pose2};
+use starc_pipeline::explore::{between, compose, Explorer, Pose2};
 
 /// The base's contact is checked this often.
 const CONTACT_EVERY_NS: u64 = 50_000_000;
@@ -65,19 +65,6 @@ pub struct Contact {
     pub height_m: f64,
 }
 
-/// What the base's disc of `radius_m` at `pose` touches: horizontal rays in 16 directions at
-/// three heights, as [`crate::explore_sim`] checks.
-fn contact(world: &World, pose: &Pose2, radius_m: f64, t_s: f64) -> Option<(u16, f64)> {
-    let bodies = world.bodies_at(t_s);
-    [0.1, 0.5, 1.0].into_iter().find_map(|z| {
-        (0..16).find_map(|k| {
-            let a = f64::from(k) * std::f64::consts::TAU / 16.0;
-            let d = Vector3::new(a.cos(), a.sin(), 0.0);
-            world.cast(&Vector3::new(pose.x_m, pose.y_m, z), &d, radius_m, &bodies).map(|h| (h.label, z))
-        })
-    })
-}
-
 pub(super) struct Score {
     world: World,
     reach: Reachable,
@@ -128,12 +115,11 @@ impl Score {
         if t_ns >= self.next_contact_ns {
             self.next_contact_ns = t_ns + CONTACT_EVERY_NS;
             let t_s = t_ns as f64 * 1e-9;
-            let pose = Pose2 { x_m: s.x, y_m: s.y, yaw_rad: s.yaw_rad };
             if let Some([x, y]) = self.last_xy {
                 self.distance_m += (s.x - x).hypot(s.y - y);
             }
             self.last_xy = Some([s.x, s.y]);
-            let now = contact(&self.world, &pose, self.radius_m, t_s);
+            let now = disc_hit(&self.world, &self.world.bodies_at(t_s), [s.x, s.y], self.radius_m);
             if let Some((label, height_m)) = now {
                 self.contact_periods += 1;
                 if !self.touching {
@@ -155,13 +141,12 @@ impl Score {
     /// The LIO's first pose of the base and the true one at the same instant: they tie the
     /// explorer's grid to the world.
     pub(super) fn tie(&mut self, lio: &Pose2, truth: &Pose2) {
-        if self.world_from_grid.is_some() {
-            return;
+        if self.world_from_grid.is_none() {
+            // truth = world_from_grid ∘ lio
+            let origin = Pose2 { x_m: 0.0, y_m: 0.0, yaw_rad: 0.0 };
+            let w = compose(truth, &between(lio, &origin));
+            self.world_from_grid = Some([w.x_m, w.y_m, w.yaw_rad]);
         }
-        let yaw = truth.yaw_rad - lio.yaw_rad;
-        let (s, c) = yaw.sin_cos();
-        let (x, y) = (truth.x_m - (c * lio.x_m - s * lio.y_m), truth.y_m - (s * lio.x_m + c * lio.y_m));
-        self.world_from_grid = Some([x, y, yaw]);
     }
 
     /// One control step that took `ms`; `done` when the explorer is back home with nothing left.

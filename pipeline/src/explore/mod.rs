@@ -24,5 +24,5 @@ pub use control::{clearance_m, BodyTwist, ControlConfig, ControlState, ControlSt
 pub use explorer::{ExploreConfig, ExploreState, ExploreStep, Explorer};
 pub use frontier::{frontiers, is_frontier, Frontier};
 pub use occupancy::{Cell, OccupancyConfig, OccupancyGrid};
-pub use pilot::{Pilot, PilotConfig};
+pub use pilot::{base_pose, between, compose, Pilot, PilotConfig};
 pub use plan::{choose_goal, usable, viewpoint, Costs, GoalChoice, PlanConfig};

@@ -86,11 +86,16 @@ impl Pilot {
         }
     }
 
-    /// A placed scan: the LiDAR's pose at its end `end_ns` and its returns in the same world.
-    pub fn on_scan(&mut self, end_ns: u64, lidar_pose: &Isometry3<f64>, points: &[Vector3<f64>]) {
+    /// A placed scan: the LiDAR's pose at its end `end_ns` and its returns in the same world
+    /// (every `scan_stride`th is kept).
+    pub fn on_scan(
+        &mut self,
+        end_ns: u64,
+        lidar_pose: &Isometry3<f64>,
+        points: impl IntoIterator<Item = Vector3<f64>>,
+    ) {
         let origin = lidar_pose.translation.vector;
-        let x_axis = lidar_pose.rotation * Vector3::x();
-        let pose = Pose2 { x_m: origin.x, y_m: origin.y, yaw_rad: x_axis.y.atan2(x_axis.x) };
+        let pose = base_pose(lidar_pose);
         if self.explorer.is_none() {
             let mut explore = self.cfg.explore;
             explore.occupancy.floor_z_m = origin.z - self.cfg.lidar_height_m;
@@ -108,7 +113,7 @@ impl Pilot {
         self.anchor = Some((end_ns, pose));
         if let Some(explorer) = self.explorer.as_mut() {
             let stride = self.cfg.scan_stride.max(1);
-            let kept: Vec<Vector3<f64>> = points.iter().step_by(stride).copied().collect();
+            let kept: Vec<Vector3<f64>> = points.into_iter().step_by(stride).collect();
             explorer.add_scan(&origin, &kept);
         }
     }
@@ -136,14 +141,22 @@ impl Pilot {
     }
 }
 
+/// The base's pose under a LiDAR at `lidar_pose` (above its centre, no yaw against it): its
+/// position in the plane and the heading of its x axis.
+pub fn base_pose(lidar_pose: &Isometry3<f64>) -> Pose2 {
+    let origin = lidar_pose.translation.vector;
+    let x_axis = lidar_pose.rotation * Vector3::x();
+    Pose2 { x_m: origin.x, y_m: origin.y, yaw_rad: x_axis.y.atan2(x_axis.x) }
+}
+
 /// `b` seen from `a`: the motion from pose `a` to pose `b`, in `a`'s frame.
-fn between(a: &Pose2, b: &Pose2) -> Pose2 {
+pub fn between(a: &Pose2, b: &Pose2) -> Pose2 {
     let [x_m, y_m] = a.to_body([b.x_m, b.y_m]);
     Pose2 { x_m, y_m, yaw_rad: b.yaw_rad - a.yaw_rad }
 }
 
 /// The motion `d` (in `a`'s frame) applied at `a`.
-fn compose(a: &Pose2, d: &Pose2) -> Pose2 {
+pub fn compose(a: &Pose2, d: &Pose2) -> Pose2 {
     let (s, c) = a.yaw_rad.sin_cos();
     Pose2 { x_m: a.x_m + c * d.x_m - s * d.y_m, y_m: a.y_m + s * d.x_m + c * d.y_m, yaw_rad: a.yaw_rad + d.yaw_rad }
 }
@@ -175,7 +188,7 @@ mod tests {
             Translation3::new(2.0, 1.0, 0.6),
             UnitQuaternion::from_euler_angles(0.0, 0.1, std::f64::consts::FRAC_PI_2),
         );
-        p.on_scan(500_000_000, &pose, &[Vector3::new(2.0, 3.0, 0.1)]);
+        p.on_scan(500_000_000, &pose, [Vector3::new(2.0, 3.0, 0.1)]);
         let now = p.pose_at(800_000_000).unwrap_or_else(|| panic!("a pose"));
         // 0.3 s later at 0.5 m/s along +y.
         assert!((now.x_m - 2.0).abs() < 1e-9 && (now.y_m - 1.15).abs() < 1e-9, "{now:?}");
