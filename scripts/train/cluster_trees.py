@@ -4,10 +4,10 @@ writes config/models/cluster_trees.stpw.
 
 Input: the cluster tables of `starc dataset --clusters` (DATA/<family>-<seed>/clusters.npy: per
 cluster the detector's input vector, then the truth columns of eval/src/clusters.rs).
-Development buildings only: seeds 0-49 train, 50-59 validate; a test seed (1000 and up, or a
+Development buildings only: seeds 0-49 and 70-89 train, 50-69 validate; a test seed (1000 and up, or a
 meta.json that says "test") is refused.
 
-    starc dataset --seeds 0..59 --every 2 --clusters --no-points --out DATA
+    starc dataset --seeds 0..89 --every 2 --clusters --no-points --out DATA
     python scripts/train/cluster_trees.py --data DATA --out config/models/cluster_trees.stpw \
         --reference config/models/cluster_trees_reference.npy
 
@@ -29,7 +29,7 @@ from sklearn.ensemble import HistGradientBoostingClassifier
 
 from stpw import read_stpw, write_stpw
 
-INPUTS = 47  # pipeline/src/detect/trees/inputs.rs
+INPUTS = 76  # pipeline/src/detect/trees/inputs.rs
 POSTURE, SHARE_ON, COVERAGE, RETURNS, APART, WINDOW, CX, CY, RULE_SCORE = range(INPUTS, INPUTS + 9)
 COLUMNS = INPUTS + 9  # eval/src/clusters.rs
 VISIBLE_RETURNS = 30
@@ -171,11 +171,11 @@ def export(clf, out, x_check):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, help="a `starc dataset --clusters` directory")
-    ap.add_argument("--train-seeds", default="0-49")
-    ap.add_argument("--val-seeds", default="50-59")
+    ap.add_argument("--train-seeds", default="0-49,70-89")
+    ap.add_argument("--val-seeds", default="50-69")
     ap.add_argument("--out", required=True, help="the .stpw to write")
     ap.add_argument("--iterations", type=int, default=200)
-    ap.add_argument("--leaves", type=int, default=31)
+    ap.add_argument("--leaves", type=int, default=63)
     ap.add_argument("--learning-rate", type=float, default=0.1)
     ap.add_argument("--positive-weight", type=float, default=3.0,
                     help="weight of a person cluster against 1 for the rest (about 1 in 20 is a person)")

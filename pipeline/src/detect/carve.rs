@@ -51,6 +51,13 @@ impl Shape {
             && p.z <= self.top_m + margin_m
     }
 
+    /// Whether a box of `length_m` by `width_m` over the floor is more than `by_m` longer or
+    /// wider than this one: someone merged with what lies beside them (a bed, a bench), not
+    /// them alone.
+    pub fn outgrown_by(&self, length_m: f64, width_m: f64, by_m: f64) -> bool {
+        length_m > 2.0 * self.half_length_m + by_m || width_m > 2.0 * self.half_width_m + by_m
+    }
+
     /// Whether `xy` lies over this box's footprint moved to `centre` and grown by `margin_m`
     /// (a detection there is a piece of this person).
     pub fn covers(&self, centre: Vector2<f64>, xy: Vector2<f64>, margin_m: f64) -> bool {
@@ -103,6 +110,14 @@ mod tests {
         // The bed's top under them is below their lowest point less the margin.
         assert!(!shape.holds(at, &Vector3::new(2.0, 1.0, 0.45), 0.1));
         assert!(shape.holds(at, &Vector3::new(2.0, 1.0, 0.50), 0.1));
+    }
+
+    #[test]
+    fn a_box_a_bed_long_has_outgrown_the_person() {
+        let shape = Shape::of(&lying_on_a_bed(), 7);
+        assert!(!shape.outgrown_by(1.5, 0.6, 0.5), "a little longer and wider: still them");
+        assert!(shape.outgrown_by(2.0, 0.6, 0.5), "0.8 m longer");
+        assert!(shape.outgrown_by(1.2, 1.0, 0.5), "0.6 m wider");
     }
 
     #[test]

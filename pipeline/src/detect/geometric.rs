@@ -136,9 +136,9 @@ impl Detector for GeometricDetector {
         self.last_floor = Some(scene.floor);
         keep_above_floor(&mut self.kept, &scene, &self.cfg);
         let first = out.len();
-        let confirmed_now = self.judge_clusters(&scene, out);
+        let mut confirmed_now = self.judge_clusters(&scene, out);
         if scene.carving(&self.cfg) {
-            find_followed_again(&scene, &self.kept, &self.cfg, first, out);
+            find_followed_again(&scene, &self.kept, &self.cfg, first, out, &mut confirmed_now);
         }
         if scene.trees.is_some() {
             keep_separate(out, first, self.cfg.trees.min_separation_m);
@@ -230,16 +230,24 @@ impl GeometricDetector {
     }
 }
 
-/// Each person followed whom no detection of `out[first..]` holds is looked for in the
-/// points of the box they were last confirmed in, moved on at their velocity
-/// ([`super::carve`]); what the trees take for them there is pushed (it is no
-/// confirmation: it does not keep them followed).
+/// A detection this much longer or wider than the box someone followed was last confirmed in,
+/// over where they are, is them merged with what lies beside them (development hall-58: someone
+/// lying beside a low bench, taken whole as one lying person 0.6-1 m off them), and they are
+/// looked for inside it as if no detection held them.
+const OUTGROWN_M: f64 = 0.5;
+
+/// Each person followed whom no detection of `out[first..]` holds, or only detections that have
+/// outgrown them ([`OUTGROWN_M`]), is looked for in the points of the box they were last
+/// confirmed in, moved on at their velocity ([`super::carve`]); what the trees take for them
+/// there is pushed (it is no confirmation: it does not keep them followed) in place of the
+/// outgrown detections, whose confirmations are dropped from `confirmed_now`.
 fn find_followed_again(
     scene: &Scene<'_, '_>,
     kept: &[(u32, Vector3<f64>)],
     cfg: &DetectConfig,
     first: usize,
     out: &mut Vec<Detection>,
+    confirmed_now: &mut Vec<Shape>,
 ) {
     let mut envelope: Option<FovEnvelope> = None;
     for track in scene.tracks.iter().filter(|tr| scene.is_followed(tr, cfg)) {
@@ -250,7 +258,9 @@ fn find_followed_again(
             let xy = d.centre_m.xy();
             (xy - now_at).norm() <= cfg.follow_radius_m || shape.covers(now_at, xy, cfg.trees.min_separation_m)
         };
-        if out.get(first..).is_some_and(|found| found.iter().any(held)) {
+        let outgrown = |d: &Detection| shape.outgrown_by(d.size_m.x, d.size_m.y, OUTGROWN_M);
+        let holding: Vec<usize> = (first..out.len()).filter(|&i| held(&out[i])).collect();
+        if holding.iter().any(|&i| !outgrown(&out[i])) {
             continue;
         }
         let carved = carve(kept, shape, now_at, cfg.trees.carve_margin_m);
@@ -258,9 +268,14 @@ fn find_followed_again(
         let largest = grid.all_components().into_iter().max_by_key(|c| grid.points_of_cluster(c).count());
         let Some(cluster) = largest.filter(|c| enough_to_score(&grid, c, cfg)) else { continue };
         let Some((f, pose, s)) = scene.rate(&grid, &cluster, cfg, false, &mut envelope) else { continue };
-        if s >= cfg.trees.follow_min_score {
-            out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
+        if s < cfg.trees.follow_min_score {
+            continue;
         }
+        for &i in holding.iter().rev() {
+            let merged = out.remove(i);
+            confirmed_now.retain(|c| (c.at - merged.centre_m.xy()).norm() > 1e-6);
+        }
+        out.push(detection(scene.window, &scene.floor, &f, pose, s, grid.points_of_cluster(&cluster), cfg));
     }
 }
 
@@ -342,7 +357,7 @@ impl<'s, 'w> Scene<'s, 'w> {
     /// floor).
     fn inputs(&self, grid: &Grid, cluster: &[u32], f: &ClusterFeatures) -> [f32; trees::INPUTS] {
         let points: Vec<Vector3<f64>> = grid.points_of_cluster(cluster).filter_map(|i| self.above_floor(i)).collect();
-        trees::inputs(f, &points)
+        trees::inputs(f, &points, [self.sensor.x, self.sensor.y])
     }
 
     /// Anything reaching the ceiling band is structure (a wall, a shelf, a door lintel).

@@ -1,8 +1,10 @@
 //! What the learned scorer sees of a cluster: the features the rules use, and a profile of its
-//! shape by height (how its points and spread change from feet to head), as one f32 vector.
-//! The training data (`cluster_features` example) and the detector both build it here.
+//! shape by height (how its points and spread change from feet to head), and its shape in
+//! absolute terms ([`super::shape`]), as one f32 vector. The training data (`starc dataset
+//! --clusters`) and the detector both build it here.
 
 use super::super::ClusterFeatures;
+use super::shape::{shape_inputs, SHAPE_INPUTS};
 use nalgebra::Vector3;
 
 /// Height slices of the profile, bottom to top of the cluster.
@@ -11,14 +13,17 @@ pub const SLICES: usize = 8;
 const PER_SLICE: usize = 4;
 /// Inputs before the profile.
 const BASE: usize = 15;
+/// Inputs before the shape inputs.
+const PROFILED: usize = BASE + PER_SLICE * SLICES;
 /// Length of the input vector.
-pub const INPUTS: usize = BASE + PER_SLICE * SLICES;
+pub const INPUTS: usize = PROFILED + SHAPE_INPUTS;
 
 /// A feature that was not measured (a face share never computed) reads as this.
 const NOT_MEASURED: f32 = -1.0;
 
-/// The input vector of a cluster: `f` and its points (x, y in the world, z above the floor).
-pub fn inputs(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [f32; INPUTS] {
+/// The input vector of a cluster: `f`, its points (x, y in the world, z above the floor) and the
+/// sensor's position over the floor plan.
+pub fn inputs(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [f32; INPUTS] {
     let mut v = [0.0f32; INPUTS];
     let measured = |x: f64| if x.is_finite() { x as f32 } else { NOT_MEASURED };
     let base = [
@@ -48,7 +53,14 @@ pub fn inputs(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [f32; INPUTS] {
         v[at + 2] = s.spread_width_m as f32;
         v[at + 3] = s.offset_from_top_m as f32;
     }
+    v[PROFILED..].copy_from_slice(&shape_inputs(f, points, sensor_xy));
     v
+}
+
+/// The height slice of the profile a point `z` over the floor falls in.
+pub(super) fn slice_of(f: &ClusterFeatures, z: f64) -> usize {
+    let span = (f.top_m - f.bottom_m).max(1e-6);
+    (((z - f.bottom_m) / span * SLICES as f64).floor().max(0.0) as usize).min(SLICES - 1)
 }
 
 /// Where the points' mean height lies between the cluster's bottom (0) and top (1): a person's
@@ -75,10 +87,9 @@ struct Slice {
 /// The cluster cut into [`SLICES`] equal heights between its bottom and top.
 fn profile(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [Slice; SLICES] {
     let mut sums = [[0.0f64; 5]; SLICES]; // n, sum a, sum a^2, sum b, sum b^2
-    let span = (f.top_m - f.bottom_m).max(1e-6);
     let (s, c) = f.yaw_rad.sin_cos();
     for p in points {
-        let k = (((p.z - f.bottom_m) / span * SLICES as f64).floor().max(0.0) as usize).min(SLICES - 1);
+        let k = slice_of(f, p.z);
         let (dx, dy) = (p.x - f.centre.x, p.y - f.centre.y);
         let (a, b) = (c * dx + s * dy, -s * dx + c * dy);
         let acc = &mut sums[k];
@@ -138,7 +149,7 @@ mod tests {
         for i in 0..10 {
             pts.push(Vector3::new(1.0, 2.0, 1.5 - f64::from(i) * 0.01)); // a thin top
         }
-        let v = inputs(&f, &pts);
+        let v = inputs(&f, &pts, [0.0, 0.0]);
         let slice = |i: usize, k: usize| v[BASE + PER_SLICE * i + k];
         assert!((slice(0, 0) - 0.8).abs() < 1e-6, "bottom slice share {}", slice(0, 0));
         assert!(slice(0, 1) > 0.25, "bottom spread along the length {}", slice(0, 1));
@@ -151,7 +162,7 @@ mod tests {
 
     #[test]
     fn no_points_and_a_flat_cluster_give_finite_inputs() {
-        let v = inputs(&features(0.3, 0.3), &[]);
+        let v = inputs(&features(0.3, 0.3), &[], [0.0, 0.0]);
         assert!(v.iter().all(|x| x.is_finite()));
     }
 }

@@ -4,6 +4,7 @@
 
 pub mod inputs;
 pub mod model;
+mod shape;
 
 pub use inputs::{inputs, INPUTS};
 pub use model::{TreeModel, CLASSES};

@@ -1,0 +1,217 @@
+//! What a cluster looks like beyond its height profile: where its points lie in height over the
+//! floor, its top seen from above, and which way its slices lean as the sensor sees them.
+//!
+//! The profile in [`super::inputs`] is relative (the cluster's bottom to its top), so a seated
+//! person and a chair of the same proportions read alike there. These inputs are absolute: a
+//! head is a small cap 1.1-1.9 m up with shoulders under it, a table a wide top 0.7-0.8 m up, a
+//! chair's back a thin edge; a seated body's knees stand out towards (or away from) the sensor
+//! under the head, which a box's sides do not.
+
+use super::super::ClusterFeatures;
+use super::inputs::{slice_of, SLICES};
+use nalgebra::Vector3;
+
+/// Height bands of [`BAND_M`] from the floor; points above the last band count in it.
+const HEIGHT_BANDS: usize = 10;
+const BAND_M: f64 = 0.2;
+/// Cells of the top view.
+const CELL_M: f64 = 0.1;
+/// The cap is the cells whose highest point is within this of the cluster's top; the collar
+/// the cells below it down to twice this.
+const CAP_DEPTH_M: f64 = 0.25;
+/// Bins of the cells' highest points (a flat top puts most cells in one).
+const TOP_BIN_M: f64 = 0.1;
+
+/// Length of the shape inputs: bands, footprint (area, share of the box), cap and collar (area,
+/// extent along and across the box), the cells' tops (commonest height, its share, spread), and
+/// each slice's lean along the sensor's line of sight.
+pub const SHAPE_INPUTS: usize = HEIGHT_BANDS + 2 + 3 + 3 + 3 + SLICES;
+
+/// The shape inputs of a cluster: `f`, its points (x, y in the world, z above the floor) and the
+/// sensor's position over the floor plan.
+pub fn shape_inputs(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [f32; SHAPE_INPUTS] {
+    let mut v = Vec::with_capacity(SHAPE_INPUTS);
+    v.extend(height_bands(points));
+    let tops = TopView::new(f, points);
+    v.extend(tops.footprint(f));
+    v.extend(tops.band(f.top_m - CAP_DEPTH_M, f64::INFINITY));
+    v.extend(tops.band(f.top_m - 2.0 * CAP_DEPTH_M, f.top_m - CAP_DEPTH_M));
+    v.extend(tops.commonest_top());
+    v.extend(lean_towards_sensor(f, points, sensor_xy));
+    let mut out = [0.0f32; SHAPE_INPUTS];
+    for (slot, x) in out.iter_mut().zip(v) {
+        *slot = if x.is_finite() { x as f32 } else { 0.0 };
+    }
+    out
+}
+
+/// Share of the points in each height band over the floor.
+fn height_bands(points: &[Vector3<f64>]) -> [f64; HEIGHT_BANDS] {
+    let mut bands = [0.0; HEIGHT_BANDS];
+    for p in points {
+        let k = ((p.z / BAND_M).floor().max(0.0) as usize).min(HEIGHT_BANDS - 1);
+        bands[k] += 1.0;
+    }
+    let n = points.len().max(1) as f64;
+    bands.map(|c| c / n)
+}
+
+/// The cluster from above: the highest point of each [`CELL_M`] cell, in the box's frame (along
+/// its length, across it).
+struct TopView {
+    /// (along, across, highest point over the floor) of each occupied cell.
+    cells: Vec<(f64, f64, f64)>,
+}
+
+impl TopView {
+    fn new(f: &ClusterFeatures, points: &[Vector3<f64>]) -> Self {
+        let (s, c) = f.yaw_rad.sin_cos();
+        let cols = (f.size.x / CELL_M).ceil() as usize + 1;
+        let rows = (f.size.y / CELL_M).ceil() as usize + 1;
+        let mut top = vec![f64::NEG_INFINITY; cols * rows];
+        let index = |x: f64, half: f64, n: usize| (((x + half) / CELL_M).floor().max(0.0) as usize).min(n - 1);
+        for p in points {
+            let (dx, dy) = (p.x - f.centre.x, p.y - f.centre.y);
+            let (a, b) = (c * dx + s * dy, -s * dx + c * dy);
+            let k = index(a, f.size.x / 2.0, cols) * rows + index(b, f.size.y / 2.0, rows);
+            top[k] = top[k].max(p.z);
+        }
+        let centre = |i: usize, half: f64| (i as f64 + 0.5) * CELL_M - half;
+        let cells = (0..cols * rows)
+            .filter(|&k| top[k].is_finite())
+            .map(|k| (centre(k / rows, f.size.x / 2.0), centre(k % rows, f.size.y / 2.0), top[k]))
+            .collect();
+        Self { cells }
+    }
+
+    /// Area seen from above, and its share of the box's.
+    fn footprint(&self, f: &ClusterFeatures) -> [f64; 2] {
+        let area = self.cells.len() as f64 * CELL_M * CELL_M;
+        [area, area / (f.size.x * f.size.y).max(CELL_M * CELL_M)]
+    }
+
+    /// Area and extent along and across the box of the cells whose highest point lies in
+    /// (`low`, `high`].
+    fn band(&self, low: f64, high: f64) -> [f64; 3] {
+        let inside: Vec<_> = self.cells.iter().filter(|c| c.2 > low && c.2 <= high).collect();
+        if inside.is_empty() {
+            return [0.0; 3];
+        }
+        let extent = |get: fn(&(f64, f64, f64)) -> f64| {
+            let (lo, hi) = inside.iter().map(|c| get(c)).fold((f64::MAX, f64::MIN), |(l, h), x| (l.min(x), h.max(x)));
+            hi - lo + CELL_M
+        };
+        [inside.len() as f64 * CELL_M * CELL_M, extent(|c| c.0), extent(|c| c.1)]
+    }
+
+    /// The commonest height of the cells' tops (a table's or a seat's surface), the share of the
+    /// cells there, and the spread of the tops.
+    fn commonest_top(&self) -> [f64; 3] {
+        if self.cells.is_empty() {
+            return [0.0; 3];
+        }
+        let mut bins = std::collections::HashMap::<i64, usize>::new();
+        for c in &self.cells {
+            *bins.entry((c.2 / TOP_BIN_M).floor() as i64).or_default() += 1;
+        }
+        let (bin, count) = bins.into_iter().max_by_key(|&(b, n)| (n, -b)).unwrap_or((0, 0));
+        let n = self.cells.len() as f64;
+        let mean = self.cells.iter().map(|c| c.2).sum::<f64>() / n;
+        let spread = (self.cells.iter().map(|c| (c.2 - mean).powi(2)).sum::<f64>() / n).sqrt();
+        [(bin as f64 + 0.5) * TOP_BIN_M, count as f64 / n, spread]
+    }
+}
+
+/// For each height slice of the profile, how much nearer to the sensor (along its horizontal
+/// line of sight to the cluster) its points lie than the top slice's; 0 for an empty slice.
+fn lean_towards_sensor(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [f64; SLICES] {
+    let (rx, ry) = (f.centre.x - sensor_xy[0], f.centre.y - sensor_xy[1]);
+    let norm = rx.hypot(ry);
+    if norm < 1e-6 {
+        return [0.0; SLICES];
+    }
+    let (ux, uy) = (rx / norm, ry / norm);
+    let mut sums = [(0.0f64, 0usize); SLICES];
+    for p in points {
+        let depth = (p.x - f.centre.x) * ux + (p.y - f.centre.y) * uy;
+        let s = &mut sums[slice_of(f, p.z)];
+        s.0 += depth;
+        s.1 += 1;
+    }
+    let mean = |s: &(f64, usize)| (s.1 > 0).then(|| s.0 / s.1 as f64);
+    let top = sums.iter().rev().find_map(mean).unwrap_or(0.0);
+    sums.map(|s| mean(&s).map_or(0.0, |d| top - d))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn features(centre: [f64; 2], size: [f64; 3], top: f64) -> ClusterFeatures {
+        ClusterFeatures {
+            points: 100,
+            voxels: 20,
+            centre: Vector3::new(centre[0], centre[1], top / 2.0),
+            size: Vector3::new(size[0], size[1], size[2]),
+            yaw_rad: 0.0,
+            bottom_m: top - size[2],
+            top_m: top,
+            face_share: f64::NAN,
+            top_share: 0.1,
+            linearity: 0.2,
+            planarity: 0.3,
+            thickness_m: 0.05,
+            range_m: 3.0,
+        }
+    }
+
+    fn grid(x: [f64; 2], y: [f64; 2], z: f64, step: f64) -> Vec<Vector3<f64>> {
+        let n = |r: [f64; 2]| ((r[1] - r[0]) / step).round() as usize + 1;
+        let mut pts = Vec::new();
+        for i in 0..n(x) {
+            for j in 0..n(y) {
+                pts.push(Vector3::new(x[0] + i as f64 * step, y[0] + j as f64 * step, z));
+            }
+        }
+        pts
+    }
+
+    #[test]
+    fn a_table_top_is_wide_flat_and_common() {
+        let f = features([0.0, 0.0], [1.2, 0.8, 0.05], 0.75);
+        let v = shape_inputs(&f, &grid([-0.6, 0.6], [-0.4, 0.4], 0.75, 0.05), [-3.0, 0.0]);
+        assert!((v[3] - 1.0).abs() < 1e-6, "all points in the 0.6-0.8 m band: {:?}", &v[..HEIGHT_BANDS]);
+        let cap = &v[HEIGHT_BANDS + 2..HEIGHT_BANDS + 5];
+        assert!(cap[0] > 0.8, "the whole top is the cap: {cap:?}");
+        let tops = &v[HEIGHT_BANDS + 8..HEIGHT_BANDS + 11];
+        assert!((tops[0] - 0.75).abs() < 0.06 && tops[1] > 0.99 && tops[2] < 0.01, "{tops:?}");
+    }
+
+    #[test]
+    fn a_head_is_a_small_cap_over_wider_shoulders() {
+        let f = features([0.0, 0.0], [0.5, 0.3, 1.3], 1.3);
+        let mut pts = grid([-0.1, 0.1], [-0.1, 0.1], 1.3, 0.05);
+        pts.extend(grid([-0.25, 0.25], [-0.15, 0.15], 1.0, 0.05));
+        let v = shape_inputs(&f, &pts, [-3.0, 0.0]);
+        let (cap, collar) = (&v[HEIGHT_BANDS + 2..HEIGHT_BANDS + 5], &v[HEIGHT_BANDS + 5..HEIGHT_BANDS + 8]);
+        assert!(cap[0] < 0.1 && cap[1] < 0.35, "a head-sized cap: {cap:?}");
+        assert!(collar[1] > cap[1], "shoulders wider than the head: {collar:?} against {cap:?}");
+    }
+
+    #[test]
+    fn knees_nearer_the_sensor_than_the_head_lean_towards_it() {
+        let f = features([0.0, 0.0], [0.6, 0.4, 1.2], 1.2);
+        let mut pts = grid([0.1, 0.2], [-0.1, 0.1], 1.2, 0.05); // head, farther
+        pts.extend(grid([-0.3, -0.2], [-0.1, 0.1], 0.45, 0.05)); // knees, nearer
+        let v = shape_inputs(&f, &pts, [-3.0, 0.0]);
+        let lean = &v[SHAPE_INPUTS - SLICES..];
+        assert!((lean[3] - 0.4).abs() < 1e-6, "the knees' slice is 0.4 m nearer: {lean:?}");
+        assert_eq!(lean[SLICES - 1], 0.0);
+    }
+
+    #[test]
+    fn no_points_give_finite_inputs() {
+        let f = features([0.0, 0.0], [0.0, 0.0, 0.0], 0.0);
+        assert!(shape_inputs(&f, &[], [0.0, 0.0]).iter().all(|x| x.is_finite()));
+    }
+}
