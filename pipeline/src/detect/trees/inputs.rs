@@ -116,26 +116,32 @@ fn profile(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [Slice; SLICES] {
     })
 }
 
+/// A cluster for tests: its centre over the floor plan, size (length, width, height) and top.
+#[cfg(test)]
+pub(super) fn cluster(centre: [f64; 2], size: [f64; 3], top: f64) -> ClusterFeatures {
+    ClusterFeatures {
+        points: 100,
+        voxels: 20,
+        centre: Vector3::new(centre[0], centre[1], top - size[2] / 2.0),
+        size: Vector3::new(size[0], size[1], size[2]),
+        yaw_rad: 0.0,
+        bottom_m: top - size[2],
+        top_m: top,
+        face_share: f64::NAN,
+        top_share: 0.1,
+        linearity: 0.2,
+        planarity: 0.3,
+        thickness_m: 0.05,
+        range_m: 3.0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn features(bottom: f64, top: f64) -> ClusterFeatures {
-        ClusterFeatures {
-            points: 100,
-            voxels: 20,
-            centre: Vector3::new(1.0, 2.0, (bottom + top) / 2.0),
-            size: Vector3::new(0.5, 0.3, top - bottom),
-            yaw_rad: 0.0,
-            bottom_m: bottom,
-            top_m: top,
-            face_share: f64::NAN,
-            top_share: 0.1,
-            linearity: 0.2,
-            planarity: 0.3,
-            thickness_m: 0.05,
-            range_m: 4.0,
-        }
+        cluster([1.0, 2.0], [0.5, 0.3, top - bottom], top)
     }
 
     #[test]

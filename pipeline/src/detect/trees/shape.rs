@@ -148,21 +148,7 @@ mod tests {
     use super::*;
 
     fn features(centre: [f64; 2], size: [f64; 3], top: f64) -> ClusterFeatures {
-        ClusterFeatures {
-            points: 100,
-            voxels: 20,
-            centre: Vector3::new(centre[0], centre[1], top / 2.0),
-            size: Vector3::new(size[0], size[1], size[2]),
-            yaw_rad: 0.0,
-            bottom_m: top - size[2],
-            top_m: top,
-            face_share: f64::NAN,
-            top_share: 0.1,
-            linearity: 0.2,
-            planarity: 0.3,
-            thickness_m: 0.05,
-            range_m: 3.0,
-        }
+        super::super::inputs::cluster(centre, size, top)
     }
 
     fn grid(x: [f64; 2], y: [f64; 2], z: f64, step: f64) -> Vec<Vector3<f64>> {
