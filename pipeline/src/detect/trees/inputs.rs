@@ -1,6 +1,7 @@
-//! What the learned scorer sees of a cluster: the features the rules use, and a profile of its
-//! shape by height (how its points and spread change from feet to head), and its shape in
-//! absolute terms ([`super::shape`]), as one f32 vector. The training data (`starc dataset
+//! What the learned scorer sees of a cluster: the features the rules use, a profile of its
+//! shape by height (how its points and spread change from feet to head), its shape in absolute
+//! terms ([`super::shape`]) and which way its slices lean as the sensor sees them, as one f32
+//! vector. The training data (`starc dataset
 //! --clusters`) and the detector both build it here.
 
 use super::super::ClusterFeatures;
@@ -15,8 +16,10 @@ const PER_SLICE: usize = 4;
 const BASE: usize = 15;
 /// Inputs before the shape inputs.
 const PROFILED: usize = BASE + PER_SLICE * SLICES;
+/// Inputs before each slice's lean towards the sensor.
+const SHAPED: usize = PROFILED + SHAPE_INPUTS;
 /// Length of the input vector.
-pub const INPUTS: usize = PROFILED + SHAPE_INPUTS;
+pub const INPUTS: usize = SHAPED + SLICES;
 
 /// A feature that was not measured (a face share never computed) reads as this.
 const NOT_MEASURED: f32 = -1.0;
@@ -46,19 +49,20 @@ pub fn inputs(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2])
     for (slot, x) in v.iter_mut().zip(base) {
         *slot = measured(x);
     }
-    for (i, s) in profile(f, points).into_iter().enumerate() {
+    for (i, s) in profile(f, points, sensor_xy).into_iter().enumerate() {
         let at = BASE + PER_SLICE * i;
         v[at] = s.share as f32;
         v[at + 1] = s.spread_length_m as f32;
         v[at + 2] = s.spread_width_m as f32;
         v[at + 3] = s.offset_from_top_m as f32;
+        v[SHAPED + i] = s.lean_to_sensor_m as f32;
     }
-    v[PROFILED..].copy_from_slice(&shape_inputs(f, points, sensor_xy));
+    v[PROFILED..SHAPED].copy_from_slice(&shape_inputs(f, points));
     v
 }
 
 /// The height slice of the profile a point `z` over the floor falls in.
-pub(super) fn slice_of(f: &ClusterFeatures, z: f64) -> usize {
+fn slice_of(f: &ClusterFeatures, z: f64) -> usize {
     let span = (f.top_m - f.bottom_m).max(1e-6);
     (((z - f.bottom_m) / span * SLICES as f64).floor().max(0.0) as usize).min(SLICES - 1)
 }
@@ -74,18 +78,22 @@ fn centroid_height_share(f: &ClusterFeatures, points: &[Vector3<f64>]) -> f64 {
 }
 
 /// One height slice: its share of the points, their standard deviation along the box's length
-/// and across it, and how far their middle lies from the top slice's over the floor (a seated
-/// body's knees stick out from under its head, a chair's seat from its back; a pole's do not).
+/// and across it, how far their middle lies from the top slice's over the floor (a seated
+/// body's knees stick out from under its head, a chair's seat from its back; a pole's do not),
+/// and how much nearer the sensor, along its horizontal line of sight to the cluster, that
+/// middle lies than the top slice's (the knees towards it or away; 0 for an empty slice).
 #[derive(Clone, Copy, Default)]
 struct Slice {
     share: f64,
     spread_length_m: f64,
     spread_width_m: f64,
     offset_from_top_m: f64,
+    lean_to_sensor_m: f64,
 }
 
-/// The cluster cut into [`SLICES`] equal heights between its bottom and top.
-fn profile(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [Slice; SLICES] {
+/// The cluster cut into [`SLICES`] equal heights between its bottom and top, seen from the
+/// sensor at `sensor_xy`.
+fn profile(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [Slice; SLICES] {
     let mut sums = [[0.0f64; 5]; SLICES]; // n, sum a, sum a^2, sum b, sum b^2
     let (s, c) = f.yaw_rad.sin_cos();
     for p in points {
@@ -103,6 +111,11 @@ fn profile(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [Slice; SLICES] {
     let mean = |acc: &[f64; 5]| if acc[0] > 0.0 { Some((acc[1] / acc[0], acc[3] / acc[0])) } else { None };
     // The highest slice holding points (the top one may be empty when a few points stick up).
     let top = sums.iter().rev().find_map(mean).unwrap_or((0.0, 0.0));
+    // The line of sight in the box's frame (none when the sensor is over the centre).
+    let (rx, ry) = (f.centre.x - sensor_xy[0], f.centre.y - sensor_xy[1]);
+    let norm = rx.hypot(ry);
+    let sight = if norm < 1e-6 { (0.0, 0.0) } else { ((c * rx + s * ry) / norm, (-s * rx + c * ry) / norm) };
+    let depth = |(a, b): (f64, f64)| a * sight.0 + b * sight.1;
     sums.map(|acc| {
         let [n, sa, saa, sb, sbb] = acc;
         let spread = |sum: f64, sq: f64| if n > 0.0 { (sq / n - (sum / n).powi(2)).max(0.0).sqrt() } else { 0.0 };
@@ -112,6 +125,7 @@ fn profile(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [Slice; SLICES] {
             spread_length_m: spread(sa, saa),
             spread_width_m: spread(sb, sbb),
             offset_from_top_m: offset,
+            lean_to_sensor_m: mean(&acc).map_or(0.0, |m| depth(top) - depth(m)),
         }
     })
 }
@@ -164,6 +178,23 @@ mod tests {
         assert!(slice(0, 3) < 0.05, "the bottom is centred under the top: {}", slice(0, 3));
         assert_eq!(v[7], NOT_MEASURED, "a face share never measured");
         assert!(v.iter().all(|x| x.is_finite()));
+    }
+
+    #[test]
+    fn knees_nearer_the_sensor_than_the_head_lean_towards_it() {
+        let f = cluster([0.0, 0.0], [0.6, 0.4, 1.2], 1.2);
+        let mut pts = Vec::new();
+        for i in 0..3 {
+            for j in 0..5 {
+                let (x, y) = (f64::from(i) * 0.05, f64::from(j) * 0.05 - 0.1);
+                pts.push(Vector3::new(0.1 + x, y, 1.2)); // head, farther
+                pts.push(Vector3::new(-0.3 + x, y, 0.45)); // knees, nearer
+            }
+        }
+        let v = inputs(&f, &pts, [-3.0, 0.0]);
+        let lean = &v[SHAPED..];
+        assert!((lean[3] - 0.4).abs() < 1e-6, "the knees' slice is 0.4 m nearer: {lean:?}");
+        assert_eq!(lean[SLICES - 1], 0.0);
     }
 
     #[test]

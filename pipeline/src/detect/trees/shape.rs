@@ -1,14 +1,12 @@
 //! What a cluster looks like beyond its height profile: where its points lie in height over the
-//! floor, its top seen from above, and which way its slices lean as the sensor sees them.
+//! floor, and its top seen from above.
 //!
 //! The profile in [`super::inputs`] is relative (the cluster's bottom to its top), so a seated
 //! person and a chair of the same proportions read alike there. These inputs are absolute: a
 //! head is a small cap 1.1-1.9 m up with shoulders under it, a table a wide top 0.7-0.8 m up, a
-//! chair's back a thin edge; a seated body's knees stand out towards (or away from) the sensor
-//! under the head, which a box's sides do not.
+//! chair's back a thin edge.
 
 use super::super::ClusterFeatures;
-use super::inputs::{slice_of, SLICES};
 use nalgebra::Vector3;
 
 /// Height bands of [`BAND_M`] from the floor; points above the last band count in it.
@@ -23,13 +21,11 @@ const CAP_DEPTH_M: f64 = 0.25;
 const TOP_BIN_M: f64 = 0.1;
 
 /// Length of the shape inputs: bands, footprint (area, share of the box), cap and collar (area,
-/// extent along and across the box), the cells' tops (commonest height, its share, spread), and
-/// each slice's lean along the sensor's line of sight.
-pub const SHAPE_INPUTS: usize = HEIGHT_BANDS + 2 + 3 + 3 + 3 + SLICES;
+/// extent along and across the box), and the cells' tops (commonest height, its share, spread).
+pub const SHAPE_INPUTS: usize = HEIGHT_BANDS + 2 + 3 + 3 + 3;
 
-/// The shape inputs of a cluster: `f`, its points (x, y in the world, z above the floor) and the
-/// sensor's position over the floor plan.
-pub fn shape_inputs(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [f32; SHAPE_INPUTS] {
+/// The shape inputs of a cluster: `f` and its points (x, y in the world, z above the floor).
+pub fn shape_inputs(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [f32; SHAPE_INPUTS] {
     let mut v = Vec::with_capacity(SHAPE_INPUTS);
     v.extend(height_bands(points));
     let tops = TopView::new(f, points);
@@ -37,7 +33,6 @@ pub fn shape_inputs(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f6
     v.extend(tops.band(f.top_m - CAP_DEPTH_M, f64::INFINITY));
     v.extend(tops.band(f.top_m - 2.0 * CAP_DEPTH_M, f.top_m - CAP_DEPTH_M));
     v.extend(tops.commonest_top());
-    v.extend(lean_towards_sensor(f, points, sensor_xy));
     let mut out = [0.0f32; SHAPE_INPUTS];
     for (slot, x) in out.iter_mut().zip(v) {
         *slot = if x.is_finite() { x as f32 } else { 0.0 };
@@ -122,27 +117,6 @@ impl TopView {
     }
 }
 
-/// For each height slice of the profile, how much nearer to the sensor (along its horizontal
-/// line of sight to the cluster) its points lie than the top slice's; 0 for an empty slice.
-fn lean_towards_sensor(f: &ClusterFeatures, points: &[Vector3<f64>], sensor_xy: [f64; 2]) -> [f64; SLICES] {
-    let (rx, ry) = (f.centre.x - sensor_xy[0], f.centre.y - sensor_xy[1]);
-    let norm = rx.hypot(ry);
-    if norm < 1e-6 {
-        return [0.0; SLICES];
-    }
-    let (ux, uy) = (rx / norm, ry / norm);
-    let mut sums = [(0.0f64, 0usize); SLICES];
-    for p in points {
-        let depth = (p.x - f.centre.x) * ux + (p.y - f.centre.y) * uy;
-        let s = &mut sums[slice_of(f, p.z)];
-        s.0 += depth;
-        s.1 += 1;
-    }
-    let mean = |s: &(f64, usize)| (s.1 > 0).then(|| s.0 / s.1 as f64);
-    let top = sums.iter().rev().find_map(mean).unwrap_or(0.0);
-    sums.map(|s| mean(&s).map_or(0.0, |d| top - d))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -165,7 +139,7 @@ mod tests {
     #[test]
     fn a_table_top_is_wide_flat_and_common() {
         let f = features([0.0, 0.0], [1.2, 0.8, 0.05], 0.75);
-        let v = shape_inputs(&f, &grid([-0.6, 0.6], [-0.4, 0.4], 0.75, 0.05), [-3.0, 0.0]);
+        let v = shape_inputs(&f, &grid([-0.6, 0.6], [-0.4, 0.4], 0.75, 0.05));
         assert!((v[3] - 1.0).abs() < 1e-6, "all points in the 0.6-0.8 m band: {:?}", &v[..HEIGHT_BANDS]);
         let cap = &v[HEIGHT_BANDS + 2..HEIGHT_BANDS + 5];
         assert!(cap[0] > 0.8, "the whole top is the cap: {cap:?}");
@@ -178,26 +152,15 @@ mod tests {
         let f = features([0.0, 0.0], [0.5, 0.3, 1.3], 1.3);
         let mut pts = grid([-0.1, 0.1], [-0.1, 0.1], 1.3, 0.05);
         pts.extend(grid([-0.25, 0.25], [-0.15, 0.15], 1.0, 0.05));
-        let v = shape_inputs(&f, &pts, [-3.0, 0.0]);
+        let v = shape_inputs(&f, &pts);
         let (cap, collar) = (&v[HEIGHT_BANDS + 2..HEIGHT_BANDS + 5], &v[HEIGHT_BANDS + 5..HEIGHT_BANDS + 8]);
         assert!(cap[0] < 0.1 && cap[1] < 0.35, "a head-sized cap: {cap:?}");
         assert!(collar[1] > cap[1], "shoulders wider than the head: {collar:?} against {cap:?}");
     }
 
     #[test]
-    fn knees_nearer_the_sensor_than_the_head_lean_towards_it() {
-        let f = features([0.0, 0.0], [0.6, 0.4, 1.2], 1.2);
-        let mut pts = grid([0.1, 0.2], [-0.1, 0.1], 1.2, 0.05); // head, farther
-        pts.extend(grid([-0.3, -0.2], [-0.1, 0.1], 0.45, 0.05)); // knees, nearer
-        let v = shape_inputs(&f, &pts, [-3.0, 0.0]);
-        let lean = &v[SHAPE_INPUTS - SLICES..];
-        assert!((lean[3] - 0.4).abs() < 1e-6, "the knees' slice is 0.4 m nearer: {lean:?}");
-        assert_eq!(lean[SLICES - 1], 0.0);
-    }
-
-    #[test]
     fn no_points_give_finite_inputs() {
         let f = features([0.0, 0.0], [0.0, 0.0, 0.0], 0.0);
-        assert!(shape_inputs(&f, &[], [0.0, 0.0]).iter().all(|x| x.is_finite()));
+        assert!(shape_inputs(&f, &[]).iter().all(|x| x.is_finite()));
     }
 }
