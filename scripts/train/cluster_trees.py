@@ -4,10 +4,12 @@ writes config/models/cluster_trees.stpw.
 
 Input: the cluster tables of `starc dataset --clusters` (DATA/<family>-<seed>/clusters.npy: per
 cluster the detector's input vector, then the truth columns of eval/src/clusters.rs).
-Development buildings only: seeds 0-49 and 70-89 train, 50-69 validate; a test seed (1000 and up, or a
-meta.json that says "test") is refused.
+Development buildings only: seeds 0-49 and 70-89 and 60 extra halls (200-259, made with
+`--family hall`) train, 50-69 validate; a test seed (1000 and up, or a meta.json that says
+"test") is refused.
 
     starc dataset --seeds 0..89 --every 2 --clusters --no-points --out DATA
+    starc dataset --seeds 200..259 --family hall --every 2 --clusters --no-points --out DATA
     python scripts/train/cluster_trees.py --data DATA --out config/models/cluster_trees.stpw \
         --reference config/models/cluster_trees_reference.npy
 
@@ -63,6 +65,18 @@ def load(data_dir, seeds):
     if not rows:
         sys.exit(f"no cluster tables for those seeds in {data_dir}")
     return np.concatenate(rows), np.array(names)
+
+
+def family_weights(names, balance):
+    """Per row, (its family's share of the buildings in `names`)^-balance, normalised to a mean
+    of 1 over the buildings: a family given many extra buildings (`starc dataset --family`)
+    then adds variety without outweighing the others."""
+    buildings = sorted(set(names))
+    families = [b.split("-")[0] for b in buildings]
+    share = {f: families.count(f) / len(families) for f in set(families)}
+    per_building = {b: share[f] ** -balance for b, f in zip(buildings, families)}
+    mean = np.mean(list(per_building.values()))
+    return np.array([per_building[n] / mean for n in names])
 
 
 def targets(table):
@@ -171,7 +185,7 @@ def export(clf, out, x_check):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, help="a `starc dataset --clusters` directory")
-    ap.add_argument("--train-seeds", default="0-49,70-89")
+    ap.add_argument("--train-seeds", default="0-49,70-89,200-259")
     ap.add_argument("--val-seeds", default="50-69")
     ap.add_argument("--out", required=True, help="the .stpw to write")
     ap.add_argument("--iterations", type=int, default=200)
@@ -179,12 +193,16 @@ def main():
     ap.add_argument("--learning-rate", type=float, default=0.1)
     ap.add_argument("--positive-weight", type=float, default=3.0,
                     help="weight of a person cluster against 1 for the rest (about 1 in 20 is a person)")
+    ap.add_argument("--family-balance", type=float, default=0.5,
+                    help="weigh each building by (its family's share of the training buildings)^-B: 0 "
+                         "weighs every building alike, 1 gives every family the same total weight")
     ap.add_argument("--reference", help="also write rows and their probabilities here (.npy) for the Rust test")
     args = ap.parse_args()
 
-    train, _ = load(args.data, parse_seeds(args.train_seeds))
+    train, train_names = load(args.data, parse_seeds(args.train_seeds))
     val, _ = load(args.data, parse_seeds(args.val_seeds))
-    train, val = train[usable(train)], val[usable(val)]
+    keep = usable(train)
+    train, train_names, val = train[keep], train_names[keep], val[usable(val)]
     started = time.time()
     clf = HistGradientBoostingClassifier(
         max_iter=args.iterations,
@@ -195,7 +213,8 @@ def main():
         random_state=0,
     )
     y = targets(train)
-    clf.fit(train[:, :INPUTS].astype(np.float32), y, sample_weight=np.where(y > 0, args.positive_weight, 1.0))
+    weight = np.where(y > 0, args.positive_weight, 1.0) * family_weights(train_names, args.family_balance)
+    clf.fit(train[:, :INPUTS].astype(np.float32), y, sample_weight=weight)
     print(f"trained on {len(train)} clusters in {time.time() - started:.0f} s")
     thresholds = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
     p_val = 1.0 - clf.predict_proba(val[:, :INPUTS].astype(np.float32))[:, 0]
@@ -208,7 +227,8 @@ def main():
         rows = val[np.concatenate(pick), :INPUTS].astype(np.float32)
         np.save(args.reference, np.concatenate([rows, clf.predict_proba(rows).astype(np.float32)], axis=1))
     summary = {"train_clusters": len(train), "val_clusters": len(val), "iterations": args.iterations,
-               "leaves": args.leaves, "learning_rate": args.learning_rate, "positive_weight": args.positive_weight}
+               "leaves": args.leaves, "learning_rate": args.learning_rate, "positive_weight": args.positive_weight,
+               "family_balance": args.family_balance}
     print(json.dumps(summary))
 
 

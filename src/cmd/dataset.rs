@@ -18,6 +18,10 @@ pub struct Args {
     /// Seeds, both ends included (`0..59` is 60 buildings).
     #[arg(long)]
     seeds: super::eval::SeedRange,
+    /// flat, office, warehouse, hall, lab, or any (each seed's own family): one family's
+    /// buildings only, to give a family the training has seen too little of more examples.
+    #[arg(long, default_value = "any")]
+    family: super::gen::FamilyChoice,
     #[arg(long)]
     out: PathBuf,
     /// Every Nth detection window (3: windows that share no scan).
@@ -93,7 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn one_building(args: &Args, seed: u64) -> anyhow::Result<(String, Exported)> {
-    let g = gen::generate(seed, None)?;
+    let g = gen::generate(seed, args.family.0)?;
     let name = format!("{}-{seed}", g.family);
     let sim_dir = args.out.join("sim").join(&name);
     std::fs::create_dir_all(&sim_dir).with_context(|| format!("creating {}", sim_dir.display()))?;

@@ -164,7 +164,7 @@ impl Default for TreesConfig {
     fn default() -> Self {
         Self {
             model: None,
-            min_score: 0.7,
+            min_score: 0.75,
             min_separation_m: 0.5,
             follow_min_score: 0.3,
             track_min_score: 0.9,

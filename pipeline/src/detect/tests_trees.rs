@@ -81,7 +81,7 @@ fn finding_again_needs_a_recent_confirmation_and_can_be_turned_off() {
 
     for off in [
         TreesConfig { carve: false, ..TreesConfig::default() },
-        TreesConfig { follow_min_score: 0.7, ..TreesConfig::default() },
+        TreesConfig { follow_min_score: TreesConfig::default().min_score, ..TreesConfig::default() },
     ] {
         let mut det = GeometricDetector::new(DetectConfig { trees: off.clone(), ..DetectConfig::default() }).unwrap();
         let t = confirmed(&mut det);
