@@ -20,6 +20,7 @@ validation row.
 """
 
 import argparse
+import collections
 import json
 import re
 import sys
@@ -72,9 +73,9 @@ def family_weights(names, balance):
     of 1 over the buildings: a family given many extra buildings (`starc dataset --family`)
     then adds variety without outweighing the others."""
     buildings = sorted(set(names))
-    families = [b.split("-")[0] for b in buildings]
-    share = {f: families.count(f) / len(families) for f in set(families)}
-    per_building = {b: share[f] ** -balance for b, f in zip(buildings, families)}
+    family = {b: b.split("-")[0] for b in buildings}
+    count = collections.Counter(family.values())
+    per_building = {b: (count[f] / len(buildings)) ** -balance for b, f in family.items()}
     mean = np.mean(list(per_building.values()))
     return np.array([per_building[n] / mean for n in names])
 

@@ -26,13 +26,13 @@ pub const SHAPE_INPUTS: usize = HEIGHT_BANDS + 2 + 3 + 3 + 3;
 
 /// The shape inputs of a cluster: `f` and its points (x, y in the world, z above the floor).
 pub fn shape_inputs(f: &ClusterFeatures, points: &[Vector3<f64>]) -> [f32; SHAPE_INPUTS] {
-    let mut v = Vec::with_capacity(SHAPE_INPUTS);
-    v.extend(height_bands(points));
     let tops = TopView::new(f, points);
-    v.extend(tops.footprint(f));
-    v.extend(tops.band(f.top_m - CAP_DEPTH_M, f64::INFINITY));
-    v.extend(tops.band(f.top_m - 2.0 * CAP_DEPTH_M, f.top_m - CAP_DEPTH_M));
-    v.extend(tops.commonest_top());
+    let v = height_bands(points)
+        .into_iter()
+        .chain(tops.footprint(f))
+        .chain(tops.band(f.top_m - CAP_DEPTH_M, f64::INFINITY))
+        .chain(tops.band(f.top_m - 2.0 * CAP_DEPTH_M, f.top_m - CAP_DEPTH_M))
+        .chain(tops.commonest_top());
     let mut out = [0.0f32; SHAPE_INPUTS];
     for (slot, x) in out.iter_mut().zip(v) {
         *slot = if x.is_finite() { x as f32 } else { 0.0 };
@@ -119,11 +119,8 @@ impl TopView {
 
 #[cfg(test)]
 mod tests {
+    use super::super::inputs::cluster as features;
     use super::*;
-
-    fn features(centre: [f64; 2], size: [f64; 3], top: f64) -> ClusterFeatures {
-        super::super::inputs::cluster(centre, size, top)
-    }
 
     fn grid(x: [f64; 2], y: [f64; 2], z: f64, step: f64) -> Vec<Vector3<f64>> {
         let n = |r: [f64; 2]| ((r[1] - r[0]) / step).round() as usize + 1;
