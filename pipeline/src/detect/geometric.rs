@@ -9,6 +9,7 @@ use super::floor::estimate_floor;
 use super::follow::{tracks, Track};
 use super::fov::FovEnvelope;
 use super::occlusion::{RangeImage, Silhouette};
+use super::person_part::cut_to_person;
 use super::trees::{self, TreeModel};
 use super::{ClusterFeatures, DetectConfig, DetectWindow, Detection, Detector, DetectorKind, FloorModel, PersonPose};
 use crate::PipelineError;
@@ -142,6 +143,9 @@ impl Detector for GeometricDetector {
         }
         if scene.trees.is_some() {
             keep_separate(out, first, self.cfg.trees.min_separation_m);
+        }
+        for d in out.iter_mut().skip(first) {
+            cut_to_person(window.points, &scene.floor, d);
         }
         self.trees = trees;
         self.confirmed = followed;

@@ -33,6 +33,7 @@ mod follow;
 mod fov;
 mod geometric;
 mod occlusion;
+mod person_part;
 pub mod pillars;
 pub mod trees;
 
