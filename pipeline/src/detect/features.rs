@@ -94,6 +94,26 @@ fn on_faces(points: &[Vector3<f64>], yaw: f64, tolerance_m: f64) -> usize {
 /// `points` maps a window index to (x, y, height above floor). The face share, the costliest
 /// feature (a heading search), is measured only where `worth_faces` says so of the features
 /// with a face share of 0 (the best a scorer can see): elsewhere it is left NaN.
+/// The box along `yaw_rad` (about z) around `points`: their least and greatest coordinates in
+/// the frame turned by it.
+pub(super) fn box_along(yaw_rad: f64, points: impl IntoIterator<Item = Vector3<f64>>) -> (Vector3<f64>, Vector3<f64>) {
+    let (s, c) = yaw_rad.sin_cos();
+    let mut lo = Vector3::repeat(f64::MAX);
+    let mut hi = Vector3::repeat(f64::MIN);
+    for p in points {
+        let q = Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z);
+        lo = lo.inf(&q);
+        hi = hi.sup(&q);
+    }
+    (lo, hi)
+}
+
+/// A point of the frame turned by `yaw_rad` (about z), in the world.
+pub(super) fn from_frame(yaw_rad: f64, q: Vector3<f64>) -> Vector3<f64> {
+    let (s, c) = yaw_rad.sin_cos();
+    Vector3::new(c * q.x - s * q.y, s * q.x + c * q.y, q.z)
+}
+
 pub fn features(
     grid: &Grid,
     cluster: &[u32],
@@ -144,14 +164,7 @@ pub fn features(
     // elongated (a body lying, a walker mid-stride: the edges of a rounded outline do not give
     // a heading reliably) and the smaller footprint.
     let frame_box = |yaw: f64| {
-        let (s, c) = yaw.sin_cos();
-        let mut lo = Vector3::repeat(f64::MAX);
-        let mut hi = Vector3::repeat(f64::MIN);
-        for p in &raw {
-            let q = Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z);
-            lo = lo.inf(&q);
-            hi = hi.sup(&q);
-        }
+        let (lo, hi) = box_along(yaw, raw.iter().copied());
         (yaw, lo, hi)
     };
     let area = |b: &(f64, Vector3<f64>, Vector3<f64>)| (b.2.x - b.1.x) * (b.2.y - b.1.y);
@@ -167,10 +180,8 @@ pub fn features(
         }
         _ => edge_box,
     };
-    let (s, c) = yaw.sin_cos();
     let size = hi - lo;
-    let mid = (lo + hi) / 2.0;
-    let centre = Vector3::new(c * mid.x - s * mid.y, s * mid.x + c * mid.y, mid.z);
+    let centre = from_frame(yaw, (lo + hi) / 2.0);
     // Points on a side (the top may be the field of view's edge, the bottom is cut by the floor
     // band), against faces placed at the 2nd and 98th percentiles: range noise puts a few points of a flat face centimetres
     // outside it, and the extremes would move the faces off the bulk.

@@ -144,6 +144,8 @@ impl Detector for GeometricDetector {
         if scene.trees.is_some() {
             keep_separate(out, first, self.cfg.trees.min_separation_m);
         }
+        // Last, on the detections only: following and finding again above match confirmations
+        // to detections by the cluster's own centre, which the cut moves.
         for d in out.iter_mut().skip(first) {
             cut_to_person(window.points, &scene.floor, d);
         }

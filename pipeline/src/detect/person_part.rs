@@ -7,6 +7,7 @@
 //! head and shoulders, so the cluster's top band says where they are: the box is cut down to the
 //! points around it.
 
+use super::features::{box_along, from_frame};
 use super::{Detection, FloorModel, PersonPose, WindowPoint};
 use nalgebra::{Vector2, Vector3};
 
@@ -47,8 +48,11 @@ pub fn cut_to_person(points: &[WindowPoint], floor: &FloorModel, d: &mut Detecti
     }
     let max_top_m = if d.pose == PersonPose::Low { LOW_MAX_TOP_M } else { f64::INFINITY };
     let Some(part) = person_part(points, floor, d.yaw_rad, &d.point_indices, max_top_m) else { return };
-    let lift = floor.height(part.centre_xy.x, part.centre_xy.y, 0.0) - floor.height(d.centre_m.x, d.centre_m.y, 0.0);
-    d.centre_m = Vector3::new(part.centre_xy.x, part.centre_xy.y, d.centre_m.z - lift);
+    // The box keeps its height over the floor where it now stands.
+    let moved = part.centre_xy - d.centre_m.xy();
+    d.centre_m.x = part.centre_xy.x;
+    d.centre_m.y = part.centre_xy.y;
+    d.centre_m.z += floor.a * moved.x + floor.b * moved.y;
     d.size_m.x = part.length_m;
     d.size_m.y = part.width_m;
     d.point_indices = part.points;
@@ -63,18 +67,20 @@ fn person_part(
     idx: &[u32],
     max_top_m: f64,
 ) -> Option<PersonPart> {
-    let xy_h = |i: u32| {
-        points.get(i as usize).map(|p| {
+    // Each point once: its index, where it is over the floor, and how high over it.
+    let seen: Vec<(u32, Vector2<f64>, f64)> = idx
+        .iter()
+        .filter_map(|&i| {
+            let p = points.get(i as usize)?;
             let (x, y, z) = (f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m));
-            (Vector2::new(x, y), floor.height(x, y, z))
+            Some((i, Vector2::new(x, y), floor.height(x, y, z)))
         })
-    };
-    let top_m = idx.iter().filter_map(|&i| xy_h(i)).map(|(_, h)| h).fold(f64::MIN, f64::max);
+        .collect();
+    let top_m = seen.iter().map(|s| s.2).fold(f64::MIN, f64::max);
     if top_m > max_top_m {
         return None;
     }
-    let head: Vec<Vector2<f64>> =
-        idx.iter().filter_map(|&i| xy_h(i)).filter(|(_, h)| *h >= top_m - HEAD_BAND_M).map(|(xy, _)| xy).collect();
+    let head: Vec<Vector2<f64>> = seen.iter().filter(|s| s.2 >= top_m - HEAD_BAND_M).map(|s| s.1).collect();
     if head.is_empty() {
         return None;
     }
@@ -82,30 +88,16 @@ fn person_part(
     if head.iter().any(|xy| (xy - middle).norm() > HEAD_BAND_MAX_SPREAD_M) {
         return None;
     }
-    let body: Vec<u32> =
-        idx.iter().copied().filter(|&i| xy_h(i).is_some_and(|(xy, _)| (xy - middle).norm() <= BODY_RADIUS_M)).collect();
-    boxed(points, yaw_rad, body)
-}
-
-/// The box along `yaw_rad` around `body`'s points.
-fn boxed(points: &[WindowPoint], yaw_rad: f64, body: Vec<u32>) -> Option<PersonPart> {
+    let body: Vec<&(u32, Vector2<f64>, f64)> = seen.iter().filter(|s| (s.1 - middle).norm() <= BODY_RADIUS_M).collect();
     if body.is_empty() {
         return None;
     }
-    let (s, c) = yaw_rad.sin_cos();
-    let (mut lo, mut hi) = (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN));
-    for p in body.iter().filter_map(|&i| points.get(i as usize)) {
-        let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
-        let local = Vector2::new(c * x + s * y, -s * x + c * y);
-        lo = lo.inf(&local);
-        hi = hi.sup(&local);
-    }
-    let mid = (lo + hi) / 2.0;
+    let (lo, hi) = box_along(yaw_rad, body.iter().map(|s| Vector3::new(s.1.x, s.1.y, 0.0)));
     Some(PersonPart {
-        centre_xy: Vector2::new(c * mid.x - s * mid.y, s * mid.x + c * mid.y),
+        centre_xy: from_frame(yaw_rad, (lo + hi) / 2.0).xy(),
         length_m: hi.x - lo.x,
         width_m: hi.y - lo.y,
-        points: body,
+        points: body.iter().map(|s| s.0).collect(),
     })
 }
 
