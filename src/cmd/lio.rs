@@ -95,7 +95,7 @@ impl DeviceRun {
         writeln!(
             table,
             "end_s,health,refused,matched,rms_m,degeneracy_index,weak_directions,iterations,points_in,\
-             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us,wheel,weak_axes"
+             points_used,map_points,pos_sigma_m,yaw_sigma_deg,elapsed_us,wheel,weak_axes,voxel_m"
         )?;
         let dump = if dump {
             let mut w = create(&out.join(format!("{name}_scans.bin")))?;
@@ -167,7 +167,7 @@ impl DeviceRun {
             writeln!(self.tum, "{}", tum_line(o.end_ns, &o.lidar_pose))?;
             writeln!(
                 self.table,
-                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{},{},{}",
+                "{}.{:09},{},{},{},{:.4},{:.4},{},{},{},{},{},{:.4},{:.3},{},{},{},{}",
                 o.end_ns / 1_000_000_000,
                 o.end_ns % 1_000_000_000,
                 o.health.name(),
@@ -184,7 +184,8 @@ impl DeviceRun {
                 o.yaw_sigma_deg,
                 o.elapsed_us,
                 o.wheel.name(),
-                starc_pipeline::lio::weak_axes_names(o.update.weak_axes)
+                starc_pipeline::lio::weak_axes_names(o.update.weak_axes),
+                o.voxel_m
             )?;
             self.outputs.push(o);
         }

@@ -41,6 +41,10 @@ pub struct ImuSection {
     /// `lio::still`).
     pub still_window_s: f64,
     pub still_sigma_m_s: f64,
+    /// A scan that matched holds the velocity too where the IMU has been still and the world
+    /// acceleration the filter sees (gravity and bias taken out) stayed under this RMS over the
+    /// still window (0: only scans too sparse to match).
+    pub still_max_acc_m_s2: f64,
     /// The accelerometer's turn-on bias (1 sigma) that a still start takes for gravity: > 0
     /// ties the two in the filter's start (`lio::start`), 0 starts them apart.
     pub acc_bias_sigma_m_s2: f64,
@@ -62,6 +66,7 @@ impl Default for ImuSection {
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             still_window_s: 0.5,
             still_sigma_m_s: 0.05,
+            still_max_acc_m_s2: 0.0,
             acc_bias_sigma_m_s2: 0.0,
             gyro_noise_rad_s: noise.gyro_rad_s,
             acc_noise_m_s2: noise.acc_m_s2,
@@ -194,12 +199,23 @@ pub struct ScanSection {
     pub voxel_m: f64,
     /// At most this many of those centroids enter the update (evenly spread); 0: all.
     pub max_points: usize,
+    /// A scan left with fewer centroids than this is reduced again on voxels half the size, down
+    /// to `min_voxel_m`: a small view keeps its few planes (0: never).
+    pub min_points: usize,
+    pub min_voxel_m: f64,
 }
 
 impl Default for ScanSection {
     fn default() -> Self {
         let c = LioConfig::default();
-        Self { period_ms: 100.0, blind_m: c.blind_m, voxel_m: c.scan_voxel_m, max_points: c.max_points }
+        Self {
+            period_ms: 100.0,
+            blind_m: c.blind_m,
+            voxel_m: c.scan_voxel_m,
+            max_points: c.max_points,
+            min_points: c.scan_min_points,
+            min_voxel_m: c.scan_min_voxel_m,
+        }
     }
 }
 
@@ -271,6 +287,7 @@ impl LioFile {
             ("imu.init_window_s", self.imu.init_window_s),
             ("scan.period_ms", self.scan.period_ms),
             ("scan.voxel_m", self.scan.voxel_m),
+            ("scan.min_voxel_m", self.scan.min_voxel_m),
             ("update.residual_var_m2", self.update.residual_var_m2),
             ("update.max_neighbour_dist_m", self.update.max_neighbour_dist_m),
             ("map.voxel_m", self.map.voxel_m),
@@ -294,6 +311,7 @@ impl LioFile {
         self.health.validate().map_err(bad)?;
         let non_negative = [
             ("imu.still_sigma_m_s", self.imu.still_sigma_m_s),
+            ("imu.still_max_acc_m_s2", self.imu.still_max_acc_m_s2),
             ("imu.acc_bias_sigma_m_s2", self.imu.acc_bias_sigma_m_s2),
         ];
         for (name, v) in non_negative {
@@ -317,6 +335,7 @@ impl LioFile {
             init_max_acc_std_m_s2: self.imu.init_max_acc_std_m_s2,
             still_window_ns: (self.imu.still_window_s * 1e9) as u64,
             still_sigma_m_s: self.imu.still_sigma_m_s,
+            still_max_acc_m_s2: self.imu.still_max_acc_m_s2,
             acc_bias_sigma_m_s2: self.imu.acc_bias_sigma_m_s2,
             noise,
             update: UpdateConfig {
@@ -331,6 +350,8 @@ impl LioFile {
             scan_voxel_m: self.scan.voxel_m,
             blind_m: self.scan.blind_m,
             max_points: self.scan.max_points,
+            scan_min_points: self.scan.min_points,
+            scan_min_voxel_m: self.scan.min_voxel_m,
             map_voxel_m: self.map.voxel_m,
             map_points_per_voxel: self.map.points_per_voxel,
             map_min_spacing_m: self.map.min_spacing_m,

@@ -6,6 +6,7 @@ use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, 
 use super::ivox::VoxelMap;
 use super::level::{level_update, LevelWindow};
 use super::propagate::{step, ImuNoise, Knot};
+use super::scan_points::ScanReduction;
 use super::stand::{base_position, hold_update, stands};
 use super::start::start_covariance;
 use super::state::{Cov, State, POS, ROT, VEL};
@@ -14,7 +15,6 @@ use super::types::{Clock, ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
 use crate::timing::Stopwatch;
-use crate::voxel_hash::voxel_downsample;
 use nalgebra::{Isometry3, Rotation3, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -31,6 +31,9 @@ pub struct LioConfig {
     /// `still_window_ns` (`still_sigma_m_s` 0: never; see [`super::still`]).
     pub still_window_ns: u64,
     pub still_sigma_m_s: f64,
+    /// Also on scans that matched, where the world acceleration the filter sees stayed under this
+    /// RMS over the still window (0: only on unmatched scans; see [`super::still`]).
+    pub still_max_acc_m_s2: f64,
     /// The accelerometer bias's spread that a still start cannot tell from gravity; > 0 ties the
     /// two in the start's uncertainty, 0 starts them apart (see [`super::start`]).
     pub acc_bias_sigma_m_s2: f64,
@@ -42,6 +45,10 @@ pub struct LioConfig {
     pub blind_m: f64,
     /// At most this many scan points (voxel centroids) enter the update; 0: no limit.
     pub max_points: usize,
+    /// A scan left with fewer points than this is reduced again on voxels half the size, down to
+    /// `scan_min_voxel_m` (0: never; see [`super::scan_points`]).
+    pub scan_min_points: usize,
+    pub scan_min_voxel_m: f64,
     pub map_voxel_m: f64,
     pub map_points_per_voxel: usize,
     pub map_min_spacing_m: f64,
@@ -51,6 +58,19 @@ pub struct LioConfig {
     pub stopwatch: Stopwatch,
     /// The base's wheel odometry, when samples come ([`Lio::push_wheel`]).
     pub wheel: WheelFusion,
+}
+
+impl LioConfig {
+    /// How each scan is reduced before the update.
+    pub fn scan_reduction(&self) -> ScanReduction {
+        ScanReduction {
+            blind_m: self.blind_m,
+            voxel_m: self.scan_voxel_m,
+            min_points: self.scan_min_points,
+            min_voxel_m: self.scan_min_voxel_m,
+            max_points: self.max_points,
+        }
+    }
 }
 
 impl Default for LioConfig {
@@ -64,12 +84,15 @@ impl Default for LioConfig {
             init_max_acc_std_m_s2: DEFAULT_MAX_ACC_STD_M_S2,
             still_window_ns: 500_000_000,
             still_sigma_m_s: 0.05,
+            still_max_acc_m_s2: 0.0,
             acc_bias_sigma_m_s2: 0.0,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
             scan_voxel_m: 0.5,
             blind_m: 0.5,
             max_points: 1000,
+            scan_min_points: 0,
+            scan_min_voxel_m: 0.1,
             map_voxel_m: 0.5,
             map_points_per_voxel: 20,
             map_min_spacing_m: 0.1,
@@ -102,6 +125,8 @@ pub struct ScanOutput {
     pub yaw_sigma_deg: f64,
     pub points_in: usize,
     pub points_used: usize,
+    /// The voxel the scan was reduced on (finer than the configured one where its view was small).
+    pub voxel_m: f64,
     pub map_points: usize,
     /// Whether the wheels' twist at the scan's end was used.
     pub wheel: WheelUse,
@@ -346,6 +371,7 @@ impl Lio {
             self.advance(s.t_ns);
             self.held = Some(s);
             self.still.push(&s);
+            self.still.push_acc_world(s.t_ns, self.state.rot * (s.acc_m_s2 - self.state.bias_acc) + self.state.gravity);
             self.level.push_acc(&s.acc_m_s2);
             self.imu.pop_front();
         }
@@ -366,13 +392,7 @@ impl Lio {
         self.propagate_to(scan.end_ns);
         deskew(&scan.points, &self.knots, &self.state, &mut self.deskewed);
         let (wheel, standing) = self.wheel_step(scan.end_ns);
-        let blind_sq = self.cfg.blind_m * self.cfg.blind_m;
-        // A non-finite point fails the comparison (NaN) or is kept out explicitly (infinity).
-        let mut used = voxel_downsample(
-            self.deskewed.iter().filter(|p| p.norm_squared() >= blind_sq && p.iter().all(|v| v.is_finite())),
-            self.cfg.scan_voxel_m,
-        );
-        thin_out(&mut used, self.cfg.max_points);
+        let (used, voxel_m) = self.cfg.scan_reduction().reduce(&self.deskewed);
         let (mut report, mut verdict) = (UpdateReport::default(), None);
         if !self.map.is_empty() {
             let search_wide = self.monitor.is_lost()
@@ -382,6 +402,10 @@ impl Lio {
             }
             let (prior, prior_cov) = (self.state.clone(), self.cov);
             let mut cfg = self.cfg.update;
+            // A surface reduced on finer voxels gives more points, not more independent evidence:
+            // its weight stays that of the configured voxels (docs/lio.md, "Fine voxels where
+            // the view is small").
+            cfg.residual_var_m2 *= (self.cfg.scan_voxel_m / voxel_m).powi(2);
             if search_wide {
                 cfg.max_neighbour_dist_m *= 3.0;
                 cfg.max_iterations *= 3;
@@ -407,8 +431,11 @@ impl Lio {
             verdict = Some(v);
         }
         let refused = verdict.and_then(|v| v.refused);
-        // Where the wheels measured the velocity, they know better than the IMU's stillness.
-        if refused == Some(Refusal::TooFewMatches) && wheel != WheelUse::Applied {
+        // Where the wheels measured the velocity, they know better than the IMU's stillness. A
+        // scan that matched holds it only where the filter also sees no acceleration: an IMU
+        // cannot tell standing from gliding, and the first steps of a walk read as still.
+        let unmatched = refused == Some(Refusal::TooFewMatches);
+        if wheel != WheelUse::Applied && (unmatched || self.still.quiet(self.cfg.still_max_acc_m_s2)) {
             self.hold_if_still(scan.end_ns);
         }
         // A map too thin to match (the first scans, or a lost filter's) grows from the IMU's
@@ -452,6 +479,7 @@ impl Lio {
             yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),
             points_in: scan.points.len(),
             points_used: used.len(),
+            voxel_m,
             map_points: self.map.len(),
             wheel,
             elapsed_us: started.us(),
@@ -532,16 +560,6 @@ impl Lio {
     }
 }
 
-/// Keeps at most `max` points, evenly strided through the (voxel-ordered) list; 0 keeps all.
-fn thin_out(points: &mut Vec<Vector3<f64>>, max: usize) {
-    if max == 0 || points.len() <= max {
-        return;
-    }
-    let n = points.len();
-    let kept: Vec<_> = (0..max).filter_map(|i| points.get(i * n / max).copied()).collect();
-    *points = kept;
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -598,6 +616,51 @@ mod tests {
         assert!(lio.state().is_finite());
     }
 
+    /// A wall 3 m ahead: the scans match and hold the distance to it, but not a slide along it.
+    /// Once the scans start, the accelerometer reads 0.08 m/s^2 along the wall that the still start
+    /// did not see (its bias shifting, a tilt the wall cannot show).
+    #[test]
+    fn a_still_device_whose_scans_match_holds_its_velocity_where_the_filter_sees_no_acceleration() {
+        use super::super::types::TimedPoint;
+        let wall = |t_ns: u64| -> Vec<TimedPoint> {
+            (0..40)
+                .flat_map(|i| (0..20).map(move |k| (i, k)))
+                .map(|(i, k)| TimedPoint { x_m: 3.0, y_m: -2.0 + 0.1 * i as f32, z_m: -1.0 + 0.1 * k as f32, t_ns })
+                .collect()
+        };
+        let run = |still_max_acc_m_s2: f64| {
+            let cfg = LioConfig { still_max_acc_m_s2, scan_min_points: 1000, ..LioConfig::default() };
+            let mut lio = Lio::new(cfg);
+            let mut out = Vec::new();
+            let mut t_ns = 0u64;
+            let mut imu_until = |lio: &mut Lio, end_ns: u64, out: &mut Vec<ScanOutput>| {
+                while t_ns <= end_ns {
+                    let acc_y = if t_ns > 2_000_000_000 { 0.08 } else { 0.0 };
+                    let acc_m_s2 = Vector3::new(0.0, acc_y, 9.81);
+                    lio.push_imu(ImuSample { t_ns, clock: Clock::Ptp, gyro_rad_s: Vector3::zeros(), acc_m_s2 }, out);
+                    t_ns += 5_000_000;
+                }
+            };
+            imu_until(&mut lio, 2_000_000_000, &mut out);
+            for k in 0..30u64 {
+                let start_ns = 2_000_000_000 + k * 100_000_000;
+                let end_ns = start_ns + 100_000_000;
+                lio.push_scan(
+                    LioScan { start_ns, end_ns, clock: Clock::Ptp, points: wall(start_ns + 50_000_000) },
+                    &mut out,
+                );
+                imu_until(&mut lio, end_ns, &mut out);
+            }
+            let refused: Vec<_> = out.iter().filter_map(|o| o.refused).collect();
+            (lio.state().pos.y.abs(), lio.zero_velocity_updates(), refused)
+        };
+        let (held_m, holds, refused) = run(0.1);
+        assert!(refused.is_empty(), "every scan matched: {refused:?}");
+        assert!(held_m < 0.1 && holds >= 20, "held within {held_m:.3} m, {holds} holds");
+        let (slid_m, holds, _) = run(0.0);
+        assert!(slid_m > 0.25 && holds == 0, "without it the scans let it slide {slid_m:.3} m");
+    }
+
     #[test]
     fn a_still_device_with_nothing_to_match_holds_its_position() {
         use super::super::types::TimedPoint;
@@ -649,15 +712,5 @@ mod tests {
         let (ran_m, updates) = run(0.0);
         assert!(ran_m > 0.55, "without it, the velocity carries on: {ran_m:.3} m");
         assert_eq!(updates, 0);
-    }
-
-    #[test]
-    fn thinning_keeps_an_even_spread() {
-        let mut pts: Vec<Vector3<f64>> = (0..10).map(|i| Vector3::new(f64::from(i), 0.0, 0.0)).collect();
-        thin_out(&mut pts, 4);
-        let xs: Vec<f64> = pts.iter().map(|p| p.x).collect();
-        assert_eq!(xs, [0.0, 2.0, 5.0, 7.0]);
-        thin_out(&mut pts, 0);
-        assert_eq!(pts.len(), 4);
     }
 }

@@ -15,7 +15,7 @@ use super::init::spread;
 use super::kalman::{update3, Rows3};
 use super::state::{Cov, State, VEL};
 use super::types::ImuSample;
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use std::collections::VecDeque;
 
 /// The IMU's last `window_ns`, and whether it was still over all of it.
@@ -25,12 +25,14 @@ pub struct StillWindow {
     max_gyro_std_rad_s: f64,
     max_acc_std_m_s2: f64,
     samples: VecDeque<ImuSample>,
+    /// Each sample's acceleration in the world (gravity and bias taken out by the filter's state).
+    acc_world: VecDeque<(u64, Vector3<f64>)>,
 }
 
 impl StillWindow {
     /// Still means spreads (standard deviations) within these limits, the static start's.
     pub fn new(window_ns: u64, max_gyro_std_rad_s: f64, max_acc_std_m_s2: f64) -> Self {
-        Self { window_ns, max_gyro_std_rad_s, max_acc_std_m_s2, samples: VecDeque::new() }
+        Self { window_ns, max_gyro_std_rad_s, max_acc_std_m_s2, samples: VecDeque::new(), acc_world: VecDeque::new() }
     }
 
     /// Adds one sample (in time order) and forgets those older than the window before it.
@@ -40,6 +42,26 @@ impl StillWindow {
         while self.samples.front().is_some_and(|q| q.t_ns < from) {
             self.samples.pop_front();
         }
+    }
+
+    /// The world acceleration the filter's state gives for a sample (pushed after it, same time).
+    pub fn push_acc_world(&mut self, t_ns: u64, a: Vector3<f64>) {
+        self.acc_world.push_back((t_ns, a));
+        let from = t_ns.saturating_sub(self.window_ns);
+        while self.acc_world.front().is_some_and(|q| q.0 < from) {
+            self.acc_world.pop_front();
+        }
+    }
+
+    /// Whether the world acceleration over the window stayed under `max_acc_m_s2` (RMS); never
+    /// with a limit of 0 or no samples.
+    pub fn quiet(&self, max_acc_m_s2: f64) -> bool {
+        if max_acc_m_s2 <= 0.0 || self.acc_world.is_empty() {
+            return false;
+        }
+        let n = self.acc_world.len() as f64;
+        let mean_sq = self.acc_world.iter().map(|(_, a)| a.norm_squared()).sum::<f64>() / n;
+        mean_sq.sqrt() < max_acc_m_s2
     }
 
     /// Whether the samples span the window up to `t_ns` and their spreads stay within the limits.
@@ -68,7 +90,6 @@ pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
 
     const MS: u64 = 1_000_000;
 
@@ -100,6 +121,26 @@ mod tests {
             w.push(&sample(k * 5 * MS, 0.0, 0.0));
         }
         assert!(w.is_still(299 * 5 * MS));
+    }
+
+    /// The first steps of a walk: the IMU's spreads still read as still, the world acceleration
+    /// does not.
+    #[test]
+    fn quiet_only_while_the_world_acceleration_stays_small() {
+        let mut w = StillWindow::new(500 * MS, 0.06, 0.2);
+        assert!(!w.quiet(0.1), "nothing seen");
+        for k in 0..100u64 {
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            w.push_acc_world(k * 5 * MS, Vector3::new(0.05 * sign, 0.0, 0.02));
+        }
+        assert!(w.quiet(0.1));
+        assert!(!w.quiet(0.0), "a limit of 0 is off");
+        // Setting off: 0.3 m/s^2 forward over the last 0.2 s of the window.
+        for k in 100..140u64 {
+            w.push_acc_world(k * 5 * MS, Vector3::new(0.3, 0.0, 0.0));
+        }
+        assert!(!w.quiet(0.1));
+        assert!(w.quiet(0.3), "0.19 m/s^2 RMS over the window");
     }
 
     #[test]

@@ -100,13 +100,24 @@ pub const RIG_MIN_DIRECTION_INFO: f64 = 0.001;
 /// takes for gravity, tied to the gravity in the filter's start (`lio::start`): the BMI088's
 /// turn-on spread as the simulator draws it (docs/lio.md, "The rig's accelerometer bias").
 pub const RIG_ACC_BIAS_SIGMA_M_S2: f64 = 0.05;
+/// A scan of the rig that matched still holds its velocity at zero where the IMU has been still
+/// and the world acceleration stayed under this RMS (m/s^2; config/lio_rig.toml): a helmet stands
+/// still often while its scans hold its pose but barely its velocity (docs/lio.md, "Fine voxels
+/// where the view is small").
+pub const RIG_STILL_MAX_ACC_M_S2: f64 = 0.1;
+/// The rig's scans are reduced on finer voxels until they keep this many centroids
+/// (config/lio_rig.toml): a helmet often sees a wall within a metre and little else.
+pub const RIG_SCAN_MIN_POINTS: usize = 1000;
 
 impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
-    /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`] and [`RIG_ACC_BIAS_SIGMA_M_S2`].
+    /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
+    /// [`RIG_STILL_MAX_ACC_M_S2`] and [`RIG_SCAN_MIN_POINTS`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
+            still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
+            scan_min_points: RIG_SCAN_MIN_POINTS,
             noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             update: UpdateConfig {
                 residual_var_m2: RIG_RESIDUAL_VAR_M2,
@@ -817,7 +828,7 @@ fn window(
 mod tests {
     use super::{
         start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO,
-        RIG_RESIDUAL_VAR_M2,
+        RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_MAX_ACC_M_S2,
     };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
@@ -830,8 +841,14 @@ mod tests {
         assert_eq!(file.to_config().unwrap(), RigCoreConfig::rig_lio());
         assert_eq!(RigCoreConfig::default().lio, RigCoreConfig::rig_lio());
         // Everything but the gyro's noise, the update's residual variance and weak-direction
-        // threshold and the accelerometer bias tied to gravity is the LIO's generic default.
-        let mut generic = LioConfig { acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2, ..LioConfig::default() };
+        // threshold, the accelerometer bias tied to gravity, the still hold on matched scans and
+        // the scans' finer voxels is the LIO's generic default.
+        let mut generic = LioConfig {
+            acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
+            still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
+            scan_min_points: RIG_SCAN_MIN_POINTS,
+            ..LioConfig::default()
+        };
         generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
         generic.update.residual_var_m2 = RIG_RESIDUAL_VAR_M2;
         generic.update.min_direction_info = RIG_MIN_DIRECTION_INFO;
