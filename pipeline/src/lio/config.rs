@@ -233,6 +233,9 @@ pub struct UpdateSection {
     /// Eigen-directions of the update's normalised information (the degeneracy index's
     /// eigenvalues, 0 to 1/3) below this take no update: the IMU carries them.
     pub min_direction_info: f64,
+    /// A scan whose residual RMS comes out above this is updated again with its residual variance
+    /// grown by the square of the ratio (0: never).
+    pub fit_rms_ref_m: f64,
 }
 
 impl Default for UpdateSection {
@@ -245,6 +248,7 @@ impl Default for UpdateSection {
             max_neighbour_dist_m: u.max_neighbour_dist_m,
             max_plane_dev_m: u.max_plane_dev_m,
             min_direction_info: u.min_direction_info,
+            fit_rms_ref_m: u.fit_rms_ref_m,
         }
     }
 }
@@ -312,6 +316,7 @@ impl LioFile {
         let non_negative = [
             ("imu.still_sigma_m_s", self.imu.still_sigma_m_s),
             ("imu.still_max_acc_m_s2", self.imu.still_max_acc_m_s2),
+            ("update.fit_rms_ref_m", self.update.fit_rms_ref_m),
             ("imu.acc_bias_sigma_m_s2", self.imu.acc_bias_sigma_m_s2),
         ];
         for (name, v) in non_negative {
@@ -345,6 +350,7 @@ impl LioFile {
                 max_neighbour_dist_m: self.update.max_neighbour_dist_m,
                 max_plane_dev_m: self.update.max_plane_dev_m,
                 min_direction_info: self.update.min_direction_info,
+                fit_rms_ref_m: self.update.fit_rms_ref_m,
                 ..defaults
             },
             scan_voxel_m: self.scan.voxel_m,

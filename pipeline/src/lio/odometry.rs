@@ -12,7 +12,7 @@ use super::start::start_covariance;
 use super::state::{Cov, State, POS, ROT, VEL};
 use super::still::{zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
-use super::update::{update, UpdateConfig, UpdateReport};
+use super::update::{update_weighed_by_fit, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
 use crate::timing::Stopwatch;
 use nalgebra::{Isometry3, Rotation3, Vector3};
@@ -410,7 +410,7 @@ impl Lio {
                 cfg.max_neighbour_dist_m *= 3.0;
                 cfg.max_iterations *= 3;
             }
-            report = update(&mut self.state, &mut self.cov, &used, &self.map, &cfg);
+            report = update_weighed_by_fit(&mut self.state, &mut self.cov, &used, &self.map, &cfg);
             let moved = prior.lidar_pose().inverse() * self.state.lidar_pose();
             let fit = ScanFit {
                 matched: report.matched,

@@ -33,6 +33,9 @@ pub struct UpdateConfig {
     /// matches), and with it dropped the rest of the update and the prior's correlations move
     /// the yaw freely (docs/lio.md, the auditorium's aisle).
     pub min_direction_info: f64,
+    /// A scan whose residual RMS comes out above this is updated again from the prior with its
+    /// residual variance grown by the square of the ratio (0: never; see [`update_weighed_by_fit`]).
+    pub fit_rms_ref_m: f64,
     /// Neighbours are searched again after a step larger than these (else the planes are kept).
     pub research_rot_rad: f64,
     pub research_pos_m: f64,
@@ -49,6 +52,7 @@ impl Default for UpdateConfig {
             converge_rot_rad: 1e-3,
             converge_pos_m: 1e-3,
             min_direction_info: 1e-4,
+            fit_rms_ref_m: 0.0,
             research_rot_rad: 0.01,
             research_pos_m: 0.05,
         }
@@ -118,6 +122,29 @@ pub fn update(
     *state = x;
     *cov = (posterior + posterior.transpose()) * 0.5;
     report
+}
+
+/// [`update`], and where the scan fits more loosely than `cfg.fit_rms_ref_m` (RMS of its
+/// residuals), [`update`] again from the same prior with the residual variance grown by the square
+/// of that ratio: the scan's own residuals say how far its points can be trusted (a quick turn's
+/// de-skew errors, a view half new to the map), as KISS-ICP sizes its threshold from its own fits.
+pub fn update_weighed_by_fit(
+    state: &mut State,
+    cov: &mut Cov,
+    points: &[Vector3<f64>],
+    map: &VoxelMap,
+    cfg: &UpdateConfig,
+) -> UpdateReport {
+    let (prior, prior_cov) = (state.clone(), *cov);
+    let report = update(state, cov, points, map, cfg);
+    let loose = cfg.fit_rms_ref_m > 0.0 && report.matched > 0 && report.rms_m > cfg.fit_rms_ref_m;
+    if !loose {
+        return report;
+    }
+    *state = prior;
+    *cov = prior_cov;
+    let ratio = report.rms_m / cfg.fit_rms_ref_m;
+    update(state, cov, points, map, &UpdateConfig { residual_var_m2: cfg.residual_var_m2 * ratio * ratio, ..*cfg })
 }
 
 /// Each point's plane in the map, with the scratch space of the neighbour search. Searched
@@ -303,6 +330,48 @@ mod tests {
         assert!(report.degeneracy_index < 1e-6, "{report:?}");
         assert!((state.pos.z - 1.0).abs() < 0.01, "height corrected: {}", state.pos.z);
         assert!((state.pos.x - 0.2).abs() < 1e-6 && state.pos.y.abs() < 1e-6, "x, y kept: {:?}", state.pos);
+    }
+
+    /// A floor seen 1 m below, its points scattered by `noise_m` either way.
+    fn floor_scan(noise_m: f64) -> (VoxelMap, Vec<Vector3<f64>>) {
+        let mut map = VoxelMap::new(0.5, 20, 0.05, 100.0);
+        for i in -40..=40 {
+            for j in -40..=40 {
+                map.insert(Vector3::new(f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
+            }
+        }
+        let points = (-8..=8)
+            .flat_map(|i| (-8..=8).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+                Vector3::new(f64::from(i) * 0.2, f64::from(j) * 0.2, -1.0 + sign * noise_m)
+            })
+            .collect();
+        (map, points)
+    }
+
+    #[test]
+    fn a_scan_that_fits_loosely_weighs_less_and_a_tight_one_as_before() {
+        let cfg = UpdateConfig { fit_rms_ref_m: 0.02, ..UpdateConfig::default() };
+        let run = |noise_m: f64, cfg: &UpdateConfig, weighed: bool| {
+            let (map, points) = floor_scan(noise_m);
+            let mut state = state_at(Vector3::new(0.0, 0.0, 1.05));
+            let mut cov = Cov::identity() * 1e-2;
+            let report = if weighed {
+                update_weighed_by_fit(&mut state, &mut cov, &points, &map, cfg)
+            } else {
+                update(&mut state, &mut cov, &points, &map, cfg)
+            };
+            (state.pos.z, cov[(5, 5)], report)
+        };
+        // Tight: the same as the plain update.
+        assert_eq!(run(0.005, &cfg, true), run(0.005, &cfg, false));
+        // Loose (6 cm RMS): the height's variance after the scan grows about (0.06 / 0.02)^2 = 9 times.
+        let (_, var_plain, plain) = run(0.06, &cfg, false);
+        let (_, var_weighed, weighed) = run(0.06, &cfg, true);
+        assert!(plain.rms_m > 0.05 && weighed.matched > 200, "{plain:?} {weighed:?}");
+        let grown = var_weighed / var_plain;
+        assert!((6.0..12.0).contains(&grown), "variance grown {grown:.1} times");
     }
 
     /// A floor and a narrow far wall seen from 1 m up: yaw is weakly but truly constrained

@@ -108,11 +108,14 @@ pub const RIG_STILL_MAX_ACC_M_S2: f64 = 0.1;
 /// The rig's scans are reduced on finer voxels until they keep this many centroids
 /// (config/lio_rig.toml): a helmet often sees a wall within a metre and little else.
 pub const RIG_SCAN_MIN_POINTS: usize = 1000;
+/// A rig scan whose residuals' RMS exceeds this (m; config/lio_rig.toml) weighs less by the
+/// square of the excess (docs/lio.md, "A scan that fits loosely weighs less").
+pub const RIG_FIT_RMS_REF_M: f64 = 0.02;
 
 impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
     /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
-    /// [`RIG_STILL_MAX_ACC_M_S2`] and [`RIG_SCAN_MIN_POINTS`].
+    /// [`RIG_STILL_MAX_ACC_M_S2`], [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
@@ -122,6 +125,7 @@ impl RigCoreConfig {
             update: UpdateConfig {
                 residual_var_m2: RIG_RESIDUAL_VAR_M2,
                 min_direction_info: RIG_MIN_DIRECTION_INFO,
+                fit_rms_ref_m: RIG_FIT_RMS_REF_M,
                 ..UpdateConfig::default()
             },
             ..LioConfig::default()
@@ -827,8 +831,8 @@ fn window(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::{
-        start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO,
-        RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_MAX_ACC_M_S2,
+        start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_FIT_RMS_REF_M, RIG_GYRO_NOISE_RAD_S,
+        RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_MAX_ACC_M_S2,
     };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
@@ -852,6 +856,7 @@ mod tests {
         generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
         generic.update.residual_var_m2 = RIG_RESIDUAL_VAR_M2;
         generic.update.min_direction_info = RIG_MIN_DIRECTION_INFO;
+        generic.update.fit_rms_ref_m = RIG_FIT_RMS_REF_M;
         assert_eq!(RigCoreConfig::rig_lio(), generic);
     }
 
