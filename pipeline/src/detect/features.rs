@@ -91,9 +91,6 @@ fn on_faces(points: &[Vector3<f64>], yaw: f64, tolerance_m: f64) -> usize {
         .count()
 }
 
-/// `points` maps a window index to (x, y, height above floor). The face share, the costliest
-/// feature (a heading search), is measured only where `worth_faces` says so of the features
-/// with a face share of 0 (the best a scorer can see): elsewhere it is left NaN.
 /// The box along `yaw_rad` (about z) around `points`: their least and greatest coordinates in
 /// the frame turned by it.
 pub(super) fn box_along(yaw_rad: f64, points: impl IntoIterator<Item = Vector3<f64>>) -> (Vector3<f64>, Vector3<f64>) {
@@ -114,6 +111,9 @@ pub(super) fn from_frame(yaw_rad: f64, q: Vector3<f64>) -> Vector3<f64> {
     Vector3::new(c * q.x - s * q.y, s * q.x + c * q.y, q.z)
 }
 
+/// `points` maps a window index to (x, y, height above floor). The face share, the costliest
+/// feature (a heading search), is measured only where `worth_faces` says so of the features
+/// with a face share of 0 (the best a scorer can see): elsewhere it is left NaN.
 pub fn features(
     grid: &Grid,
     cluster: &[u32],

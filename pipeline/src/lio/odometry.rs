@@ -12,7 +12,7 @@ use super::start::start_covariance;
 use super::state::{Cov, State, POS, ROT, VEL};
 use super::still::{zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
-use super::update::{update_weighed_by_fit, UpdateConfig, UpdateReport};
+use super::update::{update, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
 use crate::timing::Stopwatch;
 use nalgebra::{Isometry3, Rotation3, Vector3};
@@ -371,7 +371,10 @@ impl Lio {
             self.advance(s.t_ns);
             self.held = Some(s);
             self.still.push(&s);
-            self.still.push_acc_world(s.t_ns, self.state.rot * (s.acc_m_s2 - self.state.bias_acc) + self.state.gravity);
+            if self.cfg.still_max_acc_m_s2 > 0.0 {
+                let acc_world = self.state.rot * (s.acc_m_s2 - self.state.bias_acc) + self.state.gravity;
+                self.still.push_acc_world(s.t_ns, acc_world);
+            }
             self.level.push_acc(&s.acc_m_s2);
             self.imu.pop_front();
         }
@@ -410,7 +413,7 @@ impl Lio {
                 cfg.max_neighbour_dist_m *= 3.0;
                 cfg.max_iterations *= 3;
             }
-            report = update_weighed_by_fit(&mut self.state, &mut self.cov, &used, &self.map, &cfg);
+            report = update(&mut self.state, &mut self.cov, &used, &self.map, &cfg);
             let moved = prior.lidar_pose().inverse() * self.state.lidar_pose();
             let fit = ScanFit {
                 matched: report.matched,

@@ -30,16 +30,12 @@ impl ScanReduction {
     pub fn reduce(&self, deskewed: &[Vector3<f64>]) -> (Vec<Vector3<f64>>, f64) {
         let blind_sq = self.blind_m * self.blind_m;
         // A non-finite point fails the comparison (NaN) or is kept out explicitly (infinity).
-        let seen: Vec<Vector3<f64>> = deskewed
-            .iter()
-            .filter(|p| p.norm_squared() >= blind_sq && p.iter().all(|v| v.is_finite()))
-            .copied()
-            .collect();
+        let seen = || deskewed.iter().filter(move |p| p.norm_squared() >= blind_sq && p.iter().all(|v| v.is_finite()));
         let mut voxel_m = self.voxel_m;
-        let mut used = voxel_downsample(&seen, voxel_m);
+        let mut used = voxel_downsample(seen(), voxel_m);
         while used.len() < self.min_points && voxel_m * 0.5 >= self.min_voxel_m {
             voxel_m *= 0.5;
-            used = voxel_downsample(&seen, voxel_m);
+            used = voxel_downsample(seen(), voxel_m);
         }
         thin_out(&mut used, self.max_points);
         (used, voxel_m)

@@ -38,19 +38,13 @@ impl StillWindow {
     /// Adds one sample (in time order) and forgets those older than the window before it.
     pub fn push(&mut self, s: &ImuSample) {
         self.samples.push_back(*s);
-        let from = s.t_ns.saturating_sub(self.window_ns);
-        while self.samples.front().is_some_and(|q| q.t_ns < from) {
-            self.samples.pop_front();
-        }
+        forget_before(&mut self.samples, s.t_ns.saturating_sub(self.window_ns), |q| q.t_ns);
     }
 
-    /// The world acceleration the filter's state gives for a sample (pushed after it, same time).
+    /// The world acceleration the filter's state gives for a sample at `t_ns` (for [`Self::quiet`]).
     pub fn push_acc_world(&mut self, t_ns: u64, a: Vector3<f64>) {
         self.acc_world.push_back((t_ns, a));
-        let from = t_ns.saturating_sub(self.window_ns);
-        while self.acc_world.front().is_some_and(|q| q.0 < from) {
-            self.acc_world.pop_front();
-        }
+        forget_before(&mut self.acc_world, t_ns.saturating_sub(self.window_ns), |q| q.0);
     }
 
     /// Whether the world acceleration over the window stayed under `max_acc_m_s2` (RMS); never
@@ -75,6 +69,13 @@ impl StillWindow {
         }
         let s = spread(&self.samples);
         s.gyro_std <= self.max_gyro_std_rad_s && s.acc_std <= self.max_acc_std_m_s2
+    }
+}
+
+/// Drops the front of `q` (in time order) from before `from_ns`.
+fn forget_before<T>(q: &mut VecDeque<T>, from_ns: u64, t_ns: impl Fn(&T) -> u64) {
+    while q.front().is_some_and(|x| t_ns(x) < from_ns) {
+        q.pop_front();
     }
 }
 

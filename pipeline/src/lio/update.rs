@@ -34,7 +34,7 @@ pub struct UpdateConfig {
     /// the yaw freely (docs/lio.md, the auditorium's aisle).
     pub min_direction_info: f64,
     /// A scan whose residual RMS comes out above this is updated again from the prior with its
-    /// residual variance grown by the square of the ratio (0: never; see [`update_weighed_by_fit`]).
+    /// residual variance grown by the square of the ratio (0: never; see [`update`]).
     pub fit_rms_ref_m: f64,
     /// Neighbours are searched again after a step larger than these (else the planes are kept).
     pub research_rot_rad: f64,
@@ -84,6 +84,11 @@ pub fn weak_axes_names(mask: u8) -> String {
 
 /// Runs the update. Leaves state and covariance unchanged (and reports 0 matched) when too few
 /// points match or the information cannot be inverted.
+///
+/// Where the scan fits more loosely than `cfg.fit_rms_ref_m` (RMS of its residuals), it is run
+/// again from the same prior with the residual variance grown by the square of that ratio: the
+/// scan's own residuals say how far its points can be trusted (a quick turn's de-skew errors, a
+/// view half new to the map), as KISS-ICP sizes its threshold from its own fits.
 pub fn update(
     state: &mut State,
     cov: &mut Cov,
@@ -92,11 +97,45 @@ pub fn update(
     cfg: &UpdateConfig,
 ) -> UpdateReport {
     let mut report = UpdateReport::default();
-    let Some(p_inv) = cov.try_inverse() else { return report };
-    let prior = state.clone();
-    let mut x = state.clone();
+    let Some(inv) = cov.try_inverse() else { return report };
+    let prior = Prior { state, cov, inv };
     let mut planes = Planes::new(points.len(), cfg.neighbours);
-    let mut posterior = *cov;
+    let Some(mut fit) = iterate(&prior, points, map, cfg, &mut planes, &mut report) else { return report };
+    if cfg.fit_rms_ref_m > 0.0 && report.rms_m > cfg.fit_rms_ref_m {
+        let ratio = report.rms_m / cfg.fit_rms_ref_m;
+        let loose = UpdateConfig { residual_var_m2: cfg.residual_var_m2 * ratio * ratio, ..*cfg };
+        report = UpdateReport::default();
+        let Some(refit) = iterate(&prior, points, map, &loose, &mut planes, &mut report) else {
+            return report;
+        };
+        fit = refit;
+    }
+    let (x, posterior) = fit;
+    debug_assert_eq!(posterior.nrows(), DIM);
+    *state = x;
+    *cov = (posterior + posterior.transpose()) * 0.5;
+    report
+}
+
+/// The state an update starts from, its covariance and that covariance's inverse.
+struct Prior<'a> {
+    state: &'a State,
+    cov: &'a Cov,
+    inv: Cov,
+}
+
+/// The iterations of one update from `prior`: the estimate and its covariance, None where too
+/// few points match or the information cannot be inverted.
+fn iterate(
+    prior: &Prior,
+    points: &[Vector3<f64>],
+    map: &VoxelMap,
+    cfg: &UpdateConfig,
+    planes: &mut Planes,
+    report: &mut UpdateReport,
+) -> Option<(State, Cov)> {
+    let mut x = prior.state.clone();
+    let mut posterior = *prior.cov;
     let mut search = true;
     for it in 0..cfg.max_iterations {
         let mut eq = planes.normal_equations(points, &x, map, cfg, search);
@@ -104,10 +143,10 @@ pub fn update(
         report.matched = eq.n_used;
         if eq.n_used < 20 {
             report.matched = 0;
-            return report;
+            return None;
         }
-        eq.condition(cfg, it, &mut report);
-        let Some((dx, info_inv)) = solve(&p_inv, &x, &prior, &eq, cfg) else { return report };
+        eq.condition(cfg, it, report);
+        let (dx, info_inv) = solve(&prior.inv, &x, prior.state, &eq, cfg)?;
         x = x.boxplus(&dx);
         posterior = info_inv;
         let rot_step = dx.fixed_rows::<3>(0).norm();
@@ -118,33 +157,7 @@ pub fn update(
             break;
         }
     }
-    debug_assert_eq!(posterior.nrows(), DIM);
-    *state = x;
-    *cov = (posterior + posterior.transpose()) * 0.5;
-    report
-}
-
-/// [`update`], and where the scan fits more loosely than `cfg.fit_rms_ref_m` (RMS of its
-/// residuals), [`update`] again from the same prior with the residual variance grown by the square
-/// of that ratio: the scan's own residuals say how far its points can be trusted (a quick turn's
-/// de-skew errors, a view half new to the map), as KISS-ICP sizes its threshold from its own fits.
-pub fn update_weighed_by_fit(
-    state: &mut State,
-    cov: &mut Cov,
-    points: &[Vector3<f64>],
-    map: &VoxelMap,
-    cfg: &UpdateConfig,
-) -> UpdateReport {
-    let (prior, prior_cov) = (state.clone(), *cov);
-    let report = update(state, cov, points, map, cfg);
-    let loose = cfg.fit_rms_ref_m > 0.0 && report.matched > 0 && report.rms_m > cfg.fit_rms_ref_m;
-    if !loose {
-        return report;
-    }
-    *state = prior;
-    *cov = prior_cov;
-    let ratio = report.rms_m / cfg.fit_rms_ref_m;
-    update(state, cov, points, map, &UpdateConfig { residual_var_m2: cfg.residual_var_m2 * ratio * ratio, ..*cfg })
+    Some((x, posterior))
 }
 
 /// Each point's plane in the map, with the scratch space of the neighbour search. Searched
@@ -357,11 +370,8 @@ mod tests {
             let (map, points) = floor_scan(noise_m);
             let mut state = state_at(Vector3::new(0.0, 0.0, 1.05));
             let mut cov = Cov::identity() * 1e-2;
-            let report = if weighed {
-                update_weighed_by_fit(&mut state, &mut cov, &points, &map, cfg)
-            } else {
-                update(&mut state, &mut cov, &points, &map, cfg)
-            };
+            let cfg = if weighed { *cfg } else { UpdateConfig { fit_rms_ref_m: 0.0, ..*cfg } };
+            let report = update(&mut state, &mut cov, &points, &map, &cfg);
             (state.pos.z, cov[(5, 5)], report)
         };
         // Tight: the same as the plain update.
