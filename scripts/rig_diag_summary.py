@@ -7,6 +7,12 @@
                                                         the attempt from the truth right (T) or
                                                         not (.), and the search right (R), wrong
                                                         (W) or refused (.)
+    scripts/rig_diag_summary.py --settle N OUT...       where the attempt from the truth settles in each
+                                                        building's first N searches, one character a
+                                                        search: accepted right (A), right but refused
+                                                        (s), near (n), far (x); then per family (the
+                                                        name before the dash) the counts, and the
+                                                        buildings where most settle near
     scripts/rig_diag_summary.py --rivals K M OUT...     replay the rival rule on the rivals each
                                                         accepted attempt recorded (run rig_diag with
                                                         correlative_rival_min_known = 1 to record
@@ -26,6 +32,7 @@ ATTEMPT = re.compile(r'\s+att\d+ .*err\s+([\d.]+) m\s+([\d.]+) deg')
 HERE = re.compile(r'\s+known here: share ([\d.]+) score ([-\d.]+)')
 RIVAL = re.compile(r'\s+rival\s+([\d.]+) m\s+([\d.]+) deg .*known ([\d.]+) on known ([-\d.]+)')
 TRUTH = re.compile(r'\s+from truth: settles ([\d.]+) m ([\d.]+) deg .*\| acc (true|false)')
+SETTLE_CHAR = {'right': 's', 'near': 'n', 'far': 'x'}
 SUMMARY = re.compile(r'\s+SUMMARY t\s+[\d.]+ acc (true|false) err\s+([\d.]+) m\s+([\d.]+) deg')
 
 
@@ -49,7 +56,9 @@ def read(path):
         elif (m := RIVAL.match(line)) and cur is not None and cur['here'] is not None:
             cur['rivals'].append((float(m[3]), float(m[4])))
         elif (m := TRUTH.match(line)) and searches:
-            searches[-1]['truth_right'] = m[3] == 'true' and kind(float(m[1]), float(m[2])) == 'right'
+            settled = kind(float(m[1]), float(m[2]))
+            searches[-1]['truth_right'] = m[3] == 'true' and settled == 'right'
+            searches[-1]['truth_settle'] = 'A' if searches[-1]['truth_right'] else SETTLE_CHAR[settled]
         elif (m := SUMMARY.match(line)) and searches and m[1] == 'true':
             searches[-1]['outcome'] = kind(float(m[2]), float(m[3]))
     return searches, judged
@@ -59,8 +68,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--rivals', nargs=2, type=float, metavar=('K', 'M'))
     ap.add_argument('--timeline', action='store_true')
+    ap.add_argument('--settle', type=int, metavar='N')
     ap.add_argument('outputs', nargs='+')
     a = ap.parse_args()
+    if a.settle:
+        return settle(a.settle, a.outputs)
     total = collections.Counter()
     for path in a.outputs:
         searches, judged = read(path)
@@ -81,6 +93,23 @@ def main():
         print(path, dict(c))
     if not a.timeline:
         print('all', dict(total))
+
+
+def settle(first, outputs):
+    """Where the attempt from the truth settles in each building's first searches, by family."""
+    families = collections.defaultdict(collections.Counter)
+    for path in outputs:
+        searches, _ = read(path)
+        row = ''.join(s.get('truth_settle', '-') for s in searches[:first])
+        name = path.rsplit('/', 1)[-1].rsplit('.', 1)[0]
+        print(f'{name:16s} {row}')
+        family = families[name.split('-')[0]]
+        family.update(row)
+        family['buildings'] += 1
+        family['mostly near'] += row.count('n') > len(row) / 2
+    for name, c in sorted(families.items()):
+        print(f"{name:10s} buildings {c['buildings']:2d}: A {c['A']:3d} s {c['s']:3d} n {c['n']:3d} x {c['x']:3d}"
+              f"  buildings mostly near {c['mostly near']}")
 
 
 if __name__ == '__main__':

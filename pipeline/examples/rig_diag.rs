@@ -3,7 +3,8 @@
 //! Runs the offline mission's robot and rig cores in time order (as `starc mission` does) and
 //! prints, per attempt, every full attempt's result against the truth, the start gate, and a
 //! single attempt from the true pose. Environment: `NO_HINT=1` (no start hint, as scored runs),
-//! `NEVER_APPLY=1` (every search a first alignment), `ALIGN_TOML=file` (the search's settings),
+//! `NEVER_APPLY=1` (every search a first alignment), `ALIGN_TOML=file` (the settings of the search
+//! and of the attempt from the truth),
 //! `DUMP_DIR=dir` (each search's window, map and truth for scripts/align_window_peers.py).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -48,6 +49,7 @@ fn main() {
         |_| RigCoreConfig::default().align,
         |p| toml::from_str::<AlignConfig>(&std::fs::read_to_string(p).unwrap()).unwrap(),
     );
+    let truth_align = align.clone();
     let mut core = RigCore::new(RigCoreConfig {
         align,
         start_gate_m: gate_m,
@@ -222,16 +224,25 @@ fn main() {
                 reseed_yaw_step_deg: 0.0,
                 ndt_resolutions_m: vec![1.0],
                 seed_levels: 1,
-                ..AlignConfig::default()
+                ..truth_align.clone()
             };
             let t = truth_job.with_guess(truth, cfg).run().unwrap();
             if let Some(a) = t.report.attempts.first() {
                 let w = a.pose * t.frame_t_lidar;
                 let (em, ed) = pose_error(&w, &truth);
+                let d = truth.inverse() * w;
+                let (r, p, y) = d.rotation.euler_angles();
+                let dw = w.translation.vector - truth.translation.vector;
                 println!(
-                    "  from truth: settles {:.3} m {:.2} deg | {} hops {} | acc {} {}",
+                    "  from truth: settles {:.3} m {:.2} deg [world {:+.3} {:+.3} {:+.3} rpy {:+.2} {:+.2} {:+.2}] | {} hops {} | acc {} {}",
                     em,
                     ed,
+                    dw.x,
+                    dw.y,
+                    dw.z,
+                    r.to_degrees(),
+                    p.to_degrees(),
+                    y.to_degrees(),
                     fit(a),
                     a.verify_hops,
                     a.accepted,
