@@ -88,7 +88,8 @@ fn main() {
                 hint_set = true;
             }
             if core.wants_map() && rc.map_len() != core.map_len() {
-                core.set_map(rc.map_points());
+                let (points, towards_sensor) = rc.map_points_seen_from();
+                core.set_map_seen_from(points, towards_sensor);
                 if std::env::var("NO_COVERAGE").is_err() {
                     core.set_coverage(rc.map_coverage());
                 }
@@ -224,6 +225,11 @@ fn main() {
                 reseed_yaw_step_deg: 0.0,
                 ndt_resolutions_m: vec![1.0],
                 seed_levels: 1,
+                ndt_max_iterations: if std::env::var("TRUTH_NO_NDT").is_ok() {
+                    0
+                } else {
+                    truth_align.ndt_max_iterations
+                },
                 ..truth_align.clone()
             };
             let t = truth_job.with_guess(truth, cfg).run().unwrap();

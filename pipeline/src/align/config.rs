@@ -61,6 +61,12 @@ pub struct AlignConfig {
     /// not pinned down. A corridor placed metres off along itself, slightly turned, fits there
     /// at 4 cm RMS and looked constrained by its misfits (0.014 against 0.010 asked).
     pub degeneracy_residual_m: f64,
+    /// ICP drops a pair whose two surfaces were seen from opposite sides of the target's plane,
+    /// each with a mean cosine of at least this to its normal: the two faces of one wall, the
+    /// robot's outside and the rig's inside (see [`crate::align::SeenFrom`]). Needs the
+    /// source's rays and the target's directions ([`crate::align::Aligner::new_seen_from`]);
+    /// 0: off.
+    pub icp_opposite_min_side: f64,
     /// A result refused only for its degeneracy index is still accepted when what it explains
     /// pins it down (a corridor held by its far end, see [`crate::align::PinnedCheck`]): at least
     /// `pinned_min_inlier_ratio` of the source is within `inlier_distance_m` of the target (such a
@@ -223,6 +229,7 @@ impl Default for AlignConfig {
             max_update_norm: 1e-3,
             min_degeneracy_index: 0.01,
             degeneracy_residual_m: 0.05,
+            icp_opposite_min_side: 0.3,
             pinned_slides_m: vec![0.5, 1.0, 1.5, 2.0, 3.0],
             pinned_min_inlier_ratio: 0.99,
             pinned_min_lost: 0.005,
@@ -323,6 +330,9 @@ impl AlignConfig {
         }
         if !(self.ndt_max_cell_ratio.is_finite() && self.ndt_max_cell_ratio >= 0.0) {
             return bad("ndt_max_cell_ratio must be finite and not negative");
+        }
+        if !(0.0..=1.0).contains(&self.icp_opposite_min_side) {
+            return bad("icp_opposite_min_side must be in [0, 1]");
         }
         if !(self.escalate_shift_m.is_finite() && self.escalate_shift_m >= 0.0) {
             return bad("escalate_shift_m must be finite and not negative");

@@ -80,6 +80,11 @@ impl VoxelIndex {
     /// distance). The query's own cell is searched first; a neighbouring cell only while the
     /// nearest point it could hold is nearer than the best so far.
     pub fn nearest(&self, q: &Vec3, max_m: f64) -> Option<(usize, f64)> {
+        self.nearest_where(q, max_m, |_| true)
+    }
+
+    /// [`Self::nearest`] among the points whose index `accept` takes.
+    pub fn nearest_where(&self, q: &Vec3, max_m: f64, accept: impl Fn(usize) -> bool) -> Option<(usize, f64)> {
         let max2 = max_m * max_m;
         let mut best: Option<(usize, f64)> = None;
         let key = key_of(q, self.inv_cell_m);
@@ -89,7 +94,7 @@ impl VoxelIndex {
             }
             let cell = (key.0.saturating_add(d.0), key.1.saturating_add(d.1), key.2.saturating_add(d.2));
             self.scan_cell(cell, q, &mut |i, d2| {
-                if d2 <= max2 && best.is_none_or(|b| d2 < b.1) {
+                if d2 <= max2 && best.is_none_or(|b| d2 < b.1) && accept(i as usize) {
                     best = Some((i as usize, d2));
                 }
             });

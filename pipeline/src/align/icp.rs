@@ -2,16 +2,19 @@
 //! (left-multiplied updates), and the quality metrics of the result.
 
 use super::geometry::{exp_se3, Vec3, VoxelIndex};
+use super::seen_from::{seen_from_opposite_sides, SeenFrom};
 use nalgebra::{Isometry3, Matrix6, Point3, SymmetricEigen, Vector6};
 
-/// The target prepared for ICP: reduced points with normals, indexed by voxel.
+/// The target prepared for ICP: reduced points with normals, indexed by voxel, and where known
+/// the mean direction from each towards the sensors that saw it (empty: not known).
 pub struct IcpTarget {
     pub index: VoxelIndex,
     pub normals: Vec<Option<Vec3>>,
+    pub seen_from: Vec<Vec3>,
 }
 
 #[derive(Clone, Copy)]
-pub struct IcpParams {
+pub struct IcpParams<'a> {
     pub max_correspondence_m: f64,
     pub trim_ratio: f64,
     pub huber_m: f64,
@@ -20,6 +23,11 @@ pub struct IcpParams {
     pub inlier_distance_m: f64,
     /// Correspondences within this residual make up the information matrix.
     pub degeneracy_residual_m: f64,
+    /// A pair whose surfaces were seen from opposite sides of the target's plane, each at least
+    /// this far along its normal, is dropped (0: never; see [`super::seen_from`]).
+    pub opposite_min_side: f64,
+    /// Which side the source's surfaces were seen from (in the source's frame).
+    pub source_seen_from: &'a SeenFrom,
 }
 
 pub struct IcpResult {
@@ -44,18 +52,41 @@ struct Pair {
     r: f64,
 }
 
+/// The source points' mean directions towards their sensors, when pairs are judged by them
+/// (empty otherwise).
+fn source_seen_from(target: &IcpTarget, source: &[Vec3], p: &IcpParams) -> Vec<Vec3> {
+    if p.opposite_min_side <= 0.0 || target.seen_from.is_empty() || p.source_seen_from.is_empty() {
+        return Vec::new();
+    }
+    source.iter().map(|s| p.source_seen_from.at(s)).collect()
+}
+
 fn correspondences(
     target: &IcpTarget,
     source: &[Vec3],
+    source_seen: &[Vec3],
     pose: &Isometry3<f64>,
     p: &IcpParams,
     pairs: &mut Vec<Pair>,
 ) -> usize {
     pairs.clear();
     let mut inliers = 0;
-    for s in source {
+    for (k, s) in source.iter().enumerate() {
         let q = (pose * Point3::from(*s)).coords;
-        let Some((i, d2)) = target.index.nearest(&q, p.max_correspondence_m) else { continue };
+        // Where both sides are known, the nearest surface seen from the same side: a thin
+        // wall's other face, nearer, would pull the fit by the wall's thickness.
+        let found = match source_seen.get(k) {
+            Some(a) => {
+                let a = pose.rotation * a;
+                let same_side = |i: usize| match (target.normals.get(i), target.seen_from.get(i)) {
+                    (Some(Some(n)), Some(b)) => !seen_from_opposite_sides(n, &a, b, p.opposite_min_side),
+                    _ => true,
+                };
+                target.index.nearest_where(&q, p.max_correspondence_m, same_side)
+            }
+            None => target.index.nearest(&q, p.max_correspondence_m),
+        };
+        let Some((i, d2)) = found else { continue };
         if d2 <= p.inlier_distance_m * p.inlier_distance_m {
             inliers += 1;
         }
@@ -89,9 +120,10 @@ pub fn settle_along(
 ) -> Isometry3<f64> {
     let mut pose = *pose;
     let every = IcpParams { trim_ratio: 1.0, ..*p };
+    let seen = source_seen_from(target, source, p);
     let mut pairs = Vec::with_capacity(source.len());
     for _ in 0..p.max_iterations {
-        correspondences(target, source, &pose, &every, &mut pairs);
+        correspondences(target, source, &seen, &pose, &every, &mut pairs);
         let (mut num, mut den) = (0.0, 0.0);
         for pair in &pairs {
             let a = pair.n.dot(direction);
@@ -130,12 +162,13 @@ fn jacobian(q: &Vec3, n: &Vec3) -> Vector6<f64> {
 
 pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &IcpParams) -> IcpResult {
     let mut pose = pose;
+    let seen = source_seen_from(target, source, p);
     let mut pairs = Vec::with_capacity(source.len());
     let mut iterations = 0;
     let mut update_norm = f64::INFINITY;
     for _ in 0..p.max_iterations {
         iterations += 1;
-        correspondences(target, source, &pose, p, &mut pairs);
+        correspondences(target, source, &seen, &pose, p, &mut pairs);
         if pairs.len() < 6 {
             break;
         }
@@ -156,7 +189,7 @@ pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &Icp
             break;
         }
     }
-    let inliers = correspondences(target, source, &pose, p, &mut pairs);
+    let inliers = correspondences(target, source, &seen, &pose, p, &mut pairs);
     let rms_residual_m = if pairs.is_empty() {
         f64::INFINITY
     } else {

@@ -24,6 +24,7 @@ mod map;
 mod ndt;
 mod register;
 mod rejection;
+mod seen_from;
 mod tiles;
 
 pub use carve::seen_through;
@@ -43,7 +44,10 @@ pub use register::{
     WeakDirection,
 };
 pub use rejection::{slide_words, AlignFailure, Reasons, Rejection};
-pub use tiles::{decode_tile, encode_tile, encode_tiles, Tile, TileCoverage, TileMap, MAX_TILE_POINTS};
+pub use seen_from::SeenFrom;
+pub use tiles::{
+    decode_tile, encode_tile, encode_tile_seen_from, encode_tiles, Tile, TileCoverage, TileMap, MAX_TILE_POINTS,
+};
 
 #[cfg(test)]
 mod tests;
@@ -51,3 +55,5 @@ mod tests;
 mod tests_coverage;
 #[cfg(test)]
 mod tests_map;
+#[cfg(test)]
+mod tests_seen_from;

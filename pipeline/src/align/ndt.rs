@@ -8,57 +8,65 @@
 //! [`refine_level`] does, with a backtracking step so the score never gets worse.
 
 use super::geometry::{exp_se3, Vec3};
-use crate::voxel_hash::{key_of, KeyMap};
+use super::seen_from::{seen_from_opposite_sides, side_class, SeenFrom};
+use crate::voxel_hash::{key_of, KeyMap, VoxelHashMap};
 use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, Vector6};
 
-/// Normal distribution of the target points in one cell (mean and inverse covariance).
+/// Normal distribution of the target points in one cell (mean and inverse covariance), and
+/// where known the side they were seen from: the mean direction towards their sensors, and the
+/// direction the points spread least along (a flat cell's normal).
 struct Cell {
     mean: Vec3,
     info: Matrix3<f64>,
+    seen_from: Vec3,
+    normal: Vec3,
 }
 
-/// The target as NDT cells of one size.
+/// The target as NDT cells of one size. Where the target's sides are known, each cell holds a
+/// Gaussian per side (the two faces of a wall thinner than a cell are two), and a source point
+/// seen from the other side of a cell's plane does not score against it.
 pub struct NdtGrid {
     inv_cell_m: f64,
-    cells: KeyMap<Cell>,
+    cells: KeyMap<Vec<Cell>>,
     d1: f64,
     d2: f64,
+    opposite_min_side: f64,
 }
 
 /// Fewer points than this do not make a Gaussian.
 const MIN_CELL_POINTS: usize = 6;
 
 impl NdtGrid {
-    pub fn new(target: &[Vec3], cell_m: f64, outlier_ratio: f64) -> Self {
+    /// The target's Gaussians; knowing, for each target point, the direction towards the sensor that saw
+    /// it (`towards_sensor`, same length; otherwise none known); a source point is kept off a
+    /// cell seen from the other side of its plane, each at least `opposite_min_side` along its
+    /// normal (see [`super::seen_from`]).
+    pub fn new_sided(
+        target: &[Vec3],
+        towards_sensor: &[Vec3],
+        cell_m: f64,
+        outlier_ratio: f64,
+        opposite_min_side: f64,
+    ) -> Self {
         let inv_cell_m = 1.0 / cell_m;
-        let mut buckets: KeyMap<Vec<Vec3>> = KeyMap::default();
-        for p in target {
-            buckets.entry(key_of(p, inv_cell_m)).or_default().push(*p);
+        let sided = towards_sensor.len() == target.len();
+        let mut buckets: VoxelHashMap<(crate::voxel_hash::Key, u8), (Vec<Vec3>, Vec3)> = VoxelHashMap::default();
+        for (i, p) in target.iter().enumerate() {
+            let d = if sided { towards_sensor.get(i).and_then(|d| d.try_normalize(1e-9)) } else { None };
+            let d = d.unwrap_or_else(Vec3::zeros);
+            let e = buckets.entry((key_of(p, inv_cell_m), side_class(&d))).or_default();
+            e.0.push(*p);
+            e.1 += d;
         }
-        let mut cells = KeyMap::default();
-        for (key, pts) in buckets {
-            if pts.len() < MIN_CELL_POINTS {
-                continue;
+        let mut cells: KeyMap<Vec<Cell>> = KeyMap::default();
+        let mut keys: Vec<_> = buckets.keys().copied().collect();
+        keys.sort_unstable();
+        for key in keys {
+            let Some((pts, dir)) = buckets.get(&key) else { continue };
+            if let Some(mut cell) = gaussian(pts) {
+                cell.seen_from = dir / pts.len().max(1) as f64;
+                cells.entry(key.0).or_default().push(cell);
             }
-            let n = pts.len() as f64;
-            let mean = pts.iter().sum::<Vec3>() / n;
-            let mut cov = Matrix3::zeros();
-            for p in &pts {
-                let d = p - mean;
-                cov += d * d.transpose();
-            }
-            cov /= n - 1.0;
-            // Flat cells (walls, floor) have a near-zero eigenvalue; clamping it to 1% of the
-            // largest keeps the inverse bounded (Magnusson's regularisation).
-            let eig = SymmetricEigen::new(cov);
-            let max = eig.eigenvalues.max();
-            if max.is_nan() || max <= 0.0 {
-                continue;
-            }
-            let floor = (max * 0.01).max(1e-6);
-            let inv_vals = eig.eigenvalues.map(|l| 1.0 / l.max(floor));
-            let info = eig.eigenvectors * Matrix3::from_diagonal(&inv_vals) * eig.eigenvectors.transpose();
-            cells.insert(key, Cell { mean, info });
         }
         // Constants of the mixed Gaussian/uniform score (Magnusson 2009, eq. 6.8).
         let c1 = 10.0 * (1.0 - outlier_ratio);
@@ -66,7 +74,16 @@ impl NdtGrid {
         let d3 = -c2.ln();
         let d1 = -(c1 + c2).ln() - d3;
         let d2 = -2.0 * ((-(c1 * (-0.5f64).exp() + c2).ln() - d3) / d1).ln();
-        Self { inv_cell_m, cells, d1, d2 }
+        Self { inv_cell_m, cells, d1, d2, opposite_min_side }
+    }
+
+    /// The source points' mean directions towards their sensors (in the source's frame), where
+    /// this grid judges sides (empty otherwise).
+    fn sides_of(&self, source: &[Vec3], seen: &SeenFrom) -> Vec<Vec3> {
+        if self.opposite_min_side <= 0.0 || seen.is_empty() {
+            return Vec::new();
+        }
+        source.iter().map(|p| seen.at(p)).collect()
     }
 
     pub fn cell_count(&self) -> usize {
@@ -75,13 +92,14 @@ impl NdtGrid {
 
     /// Score (lower is better) of `source` moved by `t`, and how many of its points matched a cell.
     pub fn score(&self, source: &[Vec3], t: &Isometry3<f64>) -> (f64, usize) {
-        self.evaluate(source, t, None)
+        self.evaluate(source, &[], t, None)
     }
 
     /// Score (lower is better), and when `normal` is given, the Gauss-Newton system (H, g).
     fn evaluate(
         &self,
         source: &[Vec3],
+        sides: &[Vec3],
         t: &Isometry3<f64>,
         mut normal: Option<(&mut Matrix6<f64>, &mut Vector6<f64>)>,
     ) -> (f64, usize) {
@@ -89,34 +107,42 @@ impl NdtGrid {
             [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)];
         let mut score = 0.0;
         let mut matched = 0usize;
-        for p in source {
+        for (k, p) in source.iter().enumerate() {
             let q = t * nalgebra::Point3::from(*p);
             let q = q.coords;
+            let side = sides.get(k).map(|a| t.rotation * a);
             let (x, y, z) = key_of(&q, self.inv_cell_m);
             let mut hit = false;
             for (dx, dy, dz) in NEIGHBOURS {
-                let Some(cell) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz)))
+                let Some(here) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz)))
                 else {
                     continue;
                 };
-                let r = q - cell.mean;
-                let ir = cell.info * r;
-                let m = r.dot(&ir);
-                let e = (-0.5 * self.d2 * m).exp();
-                if e < 1e-12 {
-                    continue;
-                }
-                hit = true;
-                score += self.d1 * e;
-                if let Some((h, g)) = normal.as_mut() {
-                    let w = -self.d1 * self.d2 * e;
-                    // dq/dxi = [-[q]x | I]
-                    let mut j = nalgebra::Matrix3x6::zeros();
-                    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
-                    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
-                    let ji = j.transpose() * cell.info;
-                    **h += w * (ji * j);
-                    **g += w * (ji * r);
+                for cell in here {
+                    if side.is_some_and(|a| {
+                        seen_from_opposite_sides(&cell.normal, &a, &cell.seen_from, self.opposite_min_side)
+                    }) {
+                        continue;
+                    }
+                    let r = q - cell.mean;
+                    let ir = cell.info * r;
+                    let m = r.dot(&ir);
+                    let e = (-0.5 * self.d2 * m).exp();
+                    if e < 1e-12 {
+                        continue;
+                    }
+                    hit = true;
+                    score += self.d1 * e;
+                    if let Some((h, g)) = normal.as_mut() {
+                        let w = -self.d1 * self.d2 * e;
+                        // dq/dxi = [-[q]x | I]
+                        let mut j = nalgebra::Matrix3x6::zeros();
+                        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
+                        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+                        let ji = j.transpose() * cell.info;
+                        **h += w * (ji * j);
+                        **g += w * (ji * r);
+                    }
                 }
             }
             if hit {
@@ -133,16 +159,23 @@ pub struct LevelResult {
     pub iterations: u32,
 }
 
-/// Gauss-Newton on one grid from `pose`.
-pub fn refine_level(grid: &NdtGrid, source: &[Vec3], pose: Isometry3<f64>, max_iterations: u32) -> LevelResult {
+/// Gauss-Newton on one grid from `pose`; `seen` tells which side the source's surfaces were seen from (empty: unknown).
+pub fn refine_level(
+    grid: &NdtGrid,
+    source: &[Vec3],
+    seen: &SeenFrom,
+    pose: Isometry3<f64>,
+    max_iterations: u32,
+) -> LevelResult {
     let mut pose = pose;
     let mut iterations = 0;
-    let (mut score, _) = grid.evaluate(source, &pose, None);
+    let sides = grid.sides_of(source, seen);
+    let (mut score, _) = grid.evaluate(source, &sides, &pose, None);
     for _ in 0..max_iterations {
         iterations += 1;
         let mut h = Matrix6::zeros();
         let mut g = Vector6::zeros();
-        grid.evaluate(source, &pose, Some((&mut h, &mut g)));
+        grid.evaluate(source, &sides, &pose, Some((&mut h, &mut g)));
         // A little Levenberg damping keeps the step finite in directions the cells do not constrain.
         let damping = 1e-6 * h.trace().max(1e-9);
         let Some(chol) = (h + Matrix6::identity() * damping).cholesky() else { break };
@@ -151,7 +184,7 @@ pub fn refine_level(grid: &NdtGrid, source: &[Vec3], pose: Isometry3<f64>, max_i
         let mut improved = false;
         for _ in 0..6 {
             let candidate = exp_se3(&(step * scale)) * pose;
-            let (s, _) = grid.evaluate(source, &candidate, None);
+            let (s, _) = grid.evaluate(source, &sides, &candidate, None);
             if s <= score {
                 pose = candidate;
                 score = s;
@@ -165,4 +198,31 @@ pub fn refine_level(grid: &NdtGrid, source: &[Vec3], pose: Isometry3<f64>, max_i
         }
     }
     LevelResult { pose, iterations }
+}
+
+/// The Gaussian of a cell's points (at least [`MIN_CELL_POINTS`]), its sides not yet known.
+fn gaussian(pts: &[Vec3]) -> Option<Cell> {
+    if pts.len() < MIN_CELL_POINTS {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let mean = pts.iter().sum::<Vec3>() / n;
+    let mut cov = Matrix3::zeros();
+    for p in pts {
+        let d = p - mean;
+        cov += d * d.transpose();
+    }
+    cov /= n - 1.0;
+    // Flat cells (walls, floor) have a near-zero eigenvalue; clamping it to 1% of the
+    // largest keeps the inverse bounded (Magnusson's regularisation).
+    let eig = SymmetricEigen::new(cov);
+    let max = eig.eigenvalues.max();
+    if max.is_nan() || max <= 0.0 {
+        return None;
+    }
+    let normal = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+    let floor = (max * 0.01).max(1e-6);
+    let inv_vals = eig.eigenvalues.map(|l| 1.0 / l.max(floor));
+    let info = eig.eigenvectors * Matrix3::from_diagonal(&inv_vals) * eig.eigenvectors.transpose();
+    Some(Cell { mean, info, seen_from: Vec3::zeros(), normal })
 }

@@ -10,6 +10,7 @@ use super::global::{self, Described};
 use super::icp::{self, IcpParams, IcpTarget};
 use super::ndt::{self, NdtGrid};
 use super::rejection::{AlignFailure, Rejection};
+use super::seen_from::{reduce_by_side, SeenFrom};
 use crate::timing::Lap;
 use crate::voxel_hash::{voxel_downsample, voxel_downsample_every};
 use crate::PipelineError;
@@ -257,12 +258,35 @@ const SETTLE_MIN_TRANSLATION_SHARE: f64 = 0.9;
 
 impl Aligner {
     pub fn new(target: &[Vec3], config: AlignConfig) -> Result<Self, PipelineError> {
+        Self::new_seen_from(target, &[], config)
+    }
+
+    /// [`Aligner::new`] knowing which side the target's surfaces were seen from:
+    /// `towards_sensor[i]` is the direction from `target[i]` towards the sensor that saw it (zero
+    /// where unknown; another length: none known). ICP's target then keeps each voxel's sides
+    /// apart (the two faces of a thin wall stay two surfaces) and pairs a source surface only
+    /// with one seen from the same side (`icp_opposite_min_side`, with the source's rays).
+    pub fn new_seen_from(target: &[Vec3], towards_sensor: &[Vec3], config: AlignConfig) -> Result<Self, PipelineError> {
         config.validate()?;
         let t0 = config.stopwatch.start();
-        let ndt_target = voxel_downsample(target, config.ndt_target_voxel_m);
-        let grids: Vec<NdtGrid> =
-            config.ndt_resolutions_m.iter().map(|&r| NdtGrid::new(&ndt_target, r, config.ndt_outlier_ratio)).collect();
-        let icp_points = voxel_downsample(target, config.icp_voxel_m);
+        let sides_known = towards_sensor.len() == target.len() && config.icp_opposite_min_side > 0.0;
+        let (ndt_target, ndt_sides) = if sides_known {
+            reduce_by_side(target, towards_sensor, config.ndt_target_voxel_m)
+        } else {
+            (voxel_downsample(target, config.ndt_target_voxel_m), Vec::new())
+        };
+        let grids: Vec<NdtGrid> = config
+            .ndt_resolutions_m
+            .iter()
+            .map(|&r| {
+                NdtGrid::new_sided(&ndt_target, &ndt_sides, r, config.ndt_outlier_ratio, config.icp_opposite_min_side)
+            })
+            .collect();
+        let (icp_points, seen_from) = if sides_known {
+            reduce_by_side(target, towards_sensor, config.icp_voxel_m)
+        } else {
+            (voxel_downsample(target, config.icp_voxel_m), Vec::new())
+        };
         let normals = estimate_normals(&icp_points, config.normal_radius_m, config.normal_neighbours);
         let surfels = if config.free_space_rays > 0 {
             SurfelGrid::new(&icp_points, &normals, config.icp_voxel_m)
@@ -284,7 +308,7 @@ impl Aligner {
         Ok(Self {
             config,
             grids,
-            icp_target: IcpTarget { index, normals },
+            icp_target: IcpTarget { index, normals, seen_from },
             surfels,
             global_target,
             coverage: None,
@@ -330,7 +354,18 @@ impl Aligner {
         let ndt_source = voxel_downsample(&icp_source, c.ndt_source_voxel_m);
         let source_reduce_ms = t0.ms();
         let first_level = self.first_level(&ndt_source);
-        let src = Sources { ndt: &ndt_source, icp: &icp_source, rays };
+        // Which side each surface was seen from, only where the target's sides are known.
+        let sided = c.icp_opposite_min_side > 0.0 && !self.icp_target.seen_from.is_empty();
+        let seen_from_at = |voxel_m: f64| {
+            if sided {
+                SeenFrom::from_rays(rays, voxel_m)
+            } else {
+                SeenFrom::new(voxel_m)
+            }
+        };
+        let (seen_from, ndt_seen_from) = (seen_from_at(c.icp_voxel_m), seen_from_at(c.ndt_source_voxel_m));
+        let src =
+            Sources { ndt: &ndt_source, icp: &icp_source, rays, seen_from: &seen_from, ndt_seen_from: &ndt_seen_from };
         let searched = if c.reseed_yaw_step_deg > 0.0 {
             self.search_seeds(&src, initial, first_level)
         } else {
@@ -462,7 +497,7 @@ impl Aligner {
         let c = &self.config;
         let t0 = self.config.stopwatch.start();
         let source = thin(src.icp.to_vec(), c.verify_max_points);
-        let params = self.icp_params();
+        let params = self.icp_params(src.seen_from);
         let here = icp::refine(&self.icp_target, &source, a.pose, &IcpParams { max_iterations: 0, ..params });
         let distinct = |p: &Isometry3<f64>, q: &Isometry3<f64>| {
             let (dt, da) = super::geometry::pose_error(p, q);
@@ -485,7 +520,7 @@ impl Aligner {
             checked.push(s.pose);
             let mut pose = s.pose;
             for grid in self.grids.iter().skip(first_level) {
-                pose = ndt::refine_level(grid, src.ndt, pose, c.ndt_max_iterations).pose;
+                pose = ndt::refine_level(grid, src.ndt, src.ndt_seen_from, pose, c.ndt_max_iterations).pose;
             }
             let r = icp::refine(&self.icp_target, &source, pose, &params);
             let (moved_m, moved_deg) = super::geometry::pose_error(&a.pose, &r.pose);
@@ -531,9 +566,11 @@ impl Aligner {
         }
     }
 
-    fn icp_params(&self) -> IcpParams {
+    fn icp_params<'a>(&self, source_seen_from: &'a SeenFrom) -> IcpParams<'a> {
         let c = &self.config;
         IcpParams {
+            opposite_min_side: c.icp_opposite_min_side,
+            source_seen_from,
             max_correspondence_m: c.icp_max_correspondence_m,
             trim_ratio: c.icp_trim_ratio,
             huber_m: c.icp_huber_m,
@@ -800,12 +837,14 @@ impl Aligner {
         let c = &self.config;
         let levels = (first_level + c.seed_levels).min(self.grids.len());
         let n = seed_source.len().max(1) as f64;
+        // Seeds are ranked on coarse cells, every side alike.
+        let unsided = SeenFrom::new(1.0);
         let mut seeds: Vec<Seed> = starts
             .into_iter()
             .map(|start| {
                 let mut pose = start.pose;
                 for grid in self.grids.iter().take(levels).skip(first_level) {
-                    pose = ndt::refine_level(grid, seed_source, pose, c.seed_max_iterations).pose;
+                    pose = ndt::refine_level(grid, seed_source, &unsided, pose, c.seed_max_iterations).pose;
                 }
                 let (score, matched) =
                     self.grids.get(levels.saturating_sub(1)).map_or((0.0, 0), |g| g.score(seed_source, &pose));
@@ -844,10 +883,10 @@ impl Aligner {
     ) -> Attempt {
         let c = &self.config;
         let t0 = self.config.stopwatch.start();
-        let (pose, ndt_iterations) = self.ndt_stage(src.ndt, seed, first_level);
+        let (pose, ndt_iterations) = self.ndt_stage(src.ndt, src.ndt_seen_from, seed, first_level);
         let ndt_ms = t0.ms();
         let t1 = self.config.stopwatch.start();
-        let params = self.icp_params();
+        let params = self.icp_params(src.seen_from);
         let r = self.icp_stage(src.icp, pose, &params);
         let icp_ms = t1.ms();
         let mut judged = self.judged(r, src.icp);
@@ -887,11 +926,17 @@ impl Aligner {
 
     /// NDT from `seed` through every level from `first_level`, coarse to fine: the pose after
     /// the last and the iterations of each.
-    fn ndt_stage(&self, source: &[Vec3], seed: &Isometry3<f64>, first_level: usize) -> (Isometry3<f64>, Vec<u32>) {
+    fn ndt_stage(
+        &self,
+        source: &[Vec3],
+        seen: &SeenFrom,
+        seed: &Isometry3<f64>,
+        first_level: usize,
+    ) -> (Isometry3<f64>, Vec<u32>) {
         let mut pose = *seed;
         let mut ndt_iterations = Vec::with_capacity(self.grids.len());
         for grid in self.grids.iter().skip(first_level) {
-            let level = ndt::refine_level(grid, source, pose, self.config.ndt_max_iterations);
+            let level = ndt::refine_level(grid, source, seen, pose, self.config.ndt_max_iterations);
             pose = level.pose;
             ndt_iterations.push(level.iterations);
         }
@@ -1181,11 +1226,14 @@ struct Searched {
     correlative_ms: f64,
 }
 
-/// The source at each reduction, and its rays.
+/// The source at each reduction, its rays, and the side its surfaces were seen from.
 struct Sources<'a> {
     ndt: &'a [Vec3],
     icp: &'a [Vec3],
     rays: &'a [Ray],
+    seen_from: &'a SeenFrom,
+    /// The same at the NDT source's reduction.
+    ndt_seen_from: &'a SeenFrom,
 }
 
 /// An ICP result and the acceptance tests' verdict on it.

@@ -149,6 +149,36 @@ fn tiles_round_trip_and_newer_versions_win() {
 }
 
 #[test]
+fn tiles_carry_the_side_each_point_was_seen_from() {
+    use crate::align::encode_tile_seen_from;
+    let pts = vec![Vec3::new(0.5, 0.5, 0.5), Vec3::new(1.0, 2.0, 3.0)];
+    let towards = [Some(Vec3::new(-3.0, 0.0, 4.0)), None];
+    let b = encode_tile_seen_from((0, 0, 0), &pts, &towards, 4.0, 0.01, 5, None).unwrap();
+    let t = decode_tile(&b).unwrap();
+    assert_eq!(t.normals, vec![None, None]);
+    let d = t.towards_sensor[0].unwrap();
+    assert!((d - Vec3::new(-0.6, 0.0, 0.8)).norm() < 0.01, "{d:?}");
+    assert_eq!(t.towards_sensor[1], None);
+    let mut map = TileMap::default();
+    assert!(map.apply(&b).unwrap());
+    let (p, towards) = map.points_seen_from();
+    assert_eq!((p.len(), towards[1]), (2, Vec3::zeros()));
+    // Normals stay normals; a vectors field other than 0 or 1 is refused.
+    let n = decode_tile(
+        &encode_tile((0, 0, 0), &pts, &towards.iter().map(|d| Some(*d)).collect::<Vec<_>>(), 4.0, 0.01, 5, None)
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(n.normals[0].is_some() && n.towards_sensor.iter().all(Option::is_none));
+    let mut odd = b.clone();
+    odd[10] = 2;
+    let body = odd.len() - 4;
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&odd[..body]);
+    odd[body..].copy_from_slice(&crc.to_le_bytes());
+    assert!(decode_tile(&odd).is_err());
+}
+
+#[test]
 fn damaged_tiles_are_typed_errors() {
     let pts = vec![Vec3::new(0.5, 0.5, 0.5), Vec3::new(1.0, 2.0, 3.0)];
     let tiles = encode_tiles(&pts, &[None, Some(Vec3::new(0.0, 0.0, 1.0))], 4.0, 0.01, 7).unwrap();

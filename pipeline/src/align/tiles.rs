@@ -11,17 +11,21 @@
 //! | 2 | format (1: surfaces; 2: surfaces and coverage) |
 //! | 2 | tile edge, cm (1..=10000) |
 //! | 2 | quantization step, mm (1..=1000); coordinates are steps from the tile's min corner |
-//! | 2 | reserved (0) |
+//! | 2 | vectors: 0, each point's vector is its surface normal; 1, the unit vector from the point towards the sensor that first saw it |
 //! | 12 | tile key: i32 x, y, z (the tile spans `key * edge .. (key + 1) * edge`) |
 //! | 4 | tile version (the sender increments it when the tile changes) |
 //! | 4 | point count n |
-//! | 10 n | per point: u16 x, y, z (steps), i8 nx, ny, nz (normal x 127; all 0: none), u8 reserved (0) |
+//! | 10 n | per point: u16 x, y, z (steps), i8 vx, vy, vz (its vector x 127; all 0: none), u8 reserved (0) |
 //! | format 2 only: 2 | coverage voxel, mm (1..=10000; the tile edge is a whole number m of them) |
 //! | 2 | m, voxels along the tile's edge (1..=64) |
 //! | 2 | crossings: every voxel set below was crossed by at least this many of the robot's rays |
 //! | 2 | reserved (0) |
 //! | ceil(m³ / 8) | one bit per voxel, x fastest, then y, then z (LSB first); the pad bits 0 |
 //! | 4 | CRC-32 (ISO-HDLC, as zlib) of everything before it |
+//!
+//! The robot's map sends, as each point's vector, the direction towards its sensor (vectors
+//! 1): which side of a wall the robot saw, so that the rig does not pair the wall's other face
+//! with it ([`super::SeenFrom`]). A prepared map sends its normals (vectors 0).
 //!
 //! Format 2 carries the space the robot's rays crossed (see [`super::Coverage`]) beside its
 //! surfaces, so a rig on the link judges a registration by its overlap with what the robot saw,
@@ -38,6 +42,9 @@ use crate::PipelineError;
 const MAGIC: &[u8; 4] = b"STMT";
 const FORMAT: u16 = 1;
 const FORMAT_COVERED: u16 = 2;
+/// The header's `vectors`: each point's vector is its normal, or the direction towards its sensor.
+const VECTORS_NORMALS: u16 = 0;
+const VECTORS_TOWARDS_SENSOR: u16 = 1;
 const HEADER_LEN: usize = 32;
 const COVERAGE_HEADER_LEN: usize = 8;
 /// Most coverage voxels along a tile's edge (a 32 KiB bit field).
@@ -58,6 +65,8 @@ pub struct Tile {
     /// Points in the map frame and their normals (None where the sender had none).
     pub points: Vec<Vec3>,
     pub normals: Vec<Option<Vec3>>,
+    /// For each point, the direction towards the sensor that saw it (None where not sent).
+    pub towards_sensor: Vec<Option<Vec3>>,
     /// The space the robot's rays crossed in this tile (format 2).
     pub coverage: Option<TileCoverage>,
 }
@@ -131,6 +140,40 @@ pub fn encode_tile(
     version: u32,
     coverage: Option<(&Coverage, u16)>,
 ) -> Result<Vec<u8>, PipelineError> {
+    let vectors = Vectors { values: normals, kind: VECTORS_NORMALS };
+    encode(key, points, vectors, edge_m, step_m, version, coverage)
+}
+
+/// [`encode_tile`] with, for each point, the direction from it towards the sensor that saw it
+/// in place of a normal (vectors 1).
+pub fn encode_tile_seen_from(
+    key: Key,
+    points: &[Vec3],
+    towards_sensor: &[Option<Vec3>],
+    edge_m: f64,
+    step_m: f64,
+    version: u32,
+    coverage: Option<(&Coverage, u16)>,
+) -> Result<Vec<u8>, PipelineError> {
+    let vectors = Vectors { values: towards_sensor, kind: VECTORS_TOWARDS_SENSOR };
+    encode(key, points, vectors, edge_m, step_m, version, coverage)
+}
+
+/// A tile's per-point vectors and what they are (the header's `vectors`).
+struct Vectors<'a> {
+    values: &'a [Option<Vec3>],
+    kind: u16,
+}
+
+fn encode(
+    key: Key,
+    points: &[Vec3],
+    vectors: Vectors,
+    edge_m: f64,
+    step_m: f64,
+    version: u32,
+    coverage: Option<(&Coverage, u16)>,
+) -> Result<Vec<u8>, PipelineError> {
     let (edge_cm, step_mm) = tile_sizes(edge_m, step_m)?;
     let (edge_m, step_m) = (edge_cm / 100.0, step_mm / 1000.0);
     if points.len() > MAX_TILE_POINTS as usize {
@@ -142,7 +185,7 @@ pub fn encode_tile(
     b.extend_from_slice(&format.to_le_bytes());
     b.extend_from_slice(&(edge_cm as u16).to_le_bytes());
     b.extend_from_slice(&(step_mm as u16).to_le_bytes());
-    b.extend_from_slice(&0u16.to_le_bytes());
+    b.extend_from_slice(&vectors.kind.to_le_bytes());
     for k in [key.0, key.1, key.2] {
         b.extend_from_slice(&k.to_le_bytes());
     }
@@ -155,7 +198,8 @@ pub fn encode_tile(
             let q = (v / step_m).round().clamp(0.0, max_step) as u16;
             b.extend_from_slice(&q.to_le_bytes());
         }
-        let n = normals.get(i).copied().flatten().filter(|n| n.iter().all(|v| v.is_finite()));
+        let n = vectors.values.get(i).copied().flatten().filter(|n| n.iter().all(|v| v.is_finite()));
+        let n = n.and_then(|n| n.try_normalize(1e-12));
         for v in n.map_or([0.0; 3], |n| [n.x, n.y, n.z]) {
             b.push(((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8);
         }
@@ -257,9 +301,10 @@ pub fn decode_tile(b: &[u8]) -> Result<Tile, PipelineError> {
     if format != FORMAT && format != FORMAT_COVERED {
         return Err(PipelineError::Unsupported { format: "map tile", what: format!("format {format}") });
     }
-    let (edge_cm, step_mm, reserved) = (u16_at(b, 6)?, u16_at(b, 8)?, u16_at(b, 10)?);
-    if !(1..=10_000).contains(&edge_cm) || !(1..=1000).contains(&step_mm) || reserved != 0 {
-        return Err(bad(format!("edge {edge_cm} cm, step {step_mm} mm, reserved {reserved}")));
+    let (edge_cm, step_mm, vectors) = (u16_at(b, 6)?, u16_at(b, 8)?, u16_at(b, 10)?);
+    let vectors_ok = vectors == VECTORS_NORMALS || vectors == VECTORS_TOWARDS_SENSOR;
+    if !(1..=10_000).contains(&edge_cm) || !(1..=1000).contains(&step_mm) || !vectors_ok {
+        return Err(bad(format!("edge {edge_cm} cm, step {step_mm} mm, vectors {vectors}")));
     }
     let key = (u32_at(b, 12)? as i32, u32_at(b, 16)? as i32, u32_at(b, 20)? as i32);
     let version = u32_at(b, 24)?;
@@ -303,7 +348,9 @@ pub fn decode_tile(b: &[u8]) -> Result<Tile, PipelineError> {
         Some((voxel_mm, m, min_crossings)) => Some(decode_coverage(b, points_end, key, voxel_mm, m, min_crossings)?),
         None => None,
     };
-    Ok(Tile { key, version, edge_m, step_m, points, normals, coverage })
+    let none = vec![None; normals.len()];
+    let (normals, towards_sensor) = if vectors == VECTORS_TOWARDS_SENSOR { (none, normals) } else { (normals, none) };
+    Ok(Tile { key, version, edge_m, step_m, points, normals, towards_sensor, coverage })
 }
 
 /// The coverage section's header after the points: voxel size (mm), voxels per edge, crossings.
@@ -389,6 +436,19 @@ impl TileMap {
             }
         }
         out
+    }
+
+    /// All points held, in tile-key order, and for each the direction towards the sensor that
+    /// saw it (zero where the tile did not say).
+    pub fn points_seen_from(&self) -> (Vec<Vec3>, Vec<Vec3>) {
+        let mut keys: Vec<&Key> = self.tiles.keys().collect();
+        keys.sort_unstable();
+        let (mut pts, mut towards) = (Vec::new(), Vec::new());
+        for t in keys.into_iter().filter_map(|k| self.tiles.get(k)) {
+            pts.extend_from_slice(&t.points);
+            towards.extend(t.towards_sensor.iter().map(|d| d.unwrap_or_else(Vec3::zeros)));
+        }
+        (pts, towards)
     }
 
     /// All points and normals held, in tile-key order.

@@ -83,7 +83,8 @@ impl OfflineMission {
     /// Runs the registration that is due, if any, against the robot's map as it stands.
     pub fn align(&mut self) -> Option<MissionEvent> {
         if self.rig.wants_map() && self.robot.map_len() != self.rig.core().map_len() {
-            self.rig.set_map_points(self.robot.map_points());
+            let (points, towards_sensor) = self.robot.map_points_seen_from();
+            self.rig.set_map_points_seen_from(points, towards_sensor);
             if self.use_coverage {
                 self.rig.set_coverage(self.robot.map_coverage());
             }

@@ -204,6 +204,7 @@ pub struct AlignJob {
     keep_window: bool,
     odom: PoseBuffer,
     target: Arc<Vec<Vector3<f64>>>,
+    target_seen_from: Arc<Vec<Vector3<f64>>>,
     coverage: Option<Arc<Coverage>>,
     config: AlignConfig,
     lidar_pose: Isometry3<f64>,
@@ -308,7 +309,7 @@ impl AlignJob {
             points_out = kept.points_out,
             "rig window"
         );
-        let mut aligner = Aligner::new(&self.target, self.config)?;
+        let mut aligner = Aligner::new_seen_from(&self.target, &self.target_seen_from, self.config)?;
         if let Some(c) = self.coverage {
             aligner = aligner.with_coverage(c);
         }
@@ -417,6 +418,9 @@ pub struct RigCore {
     /// Where the responder is expected to start (none: anywhere the robot has mapped).
     start_hint: Option<Isometry3<f64>>,
     map: Arc<Vec<Vector3<f64>>>,
+    /// For each map point, the direction towards the robot's sensor that saw it (empty: not
+    /// known; see [`Aligner::new_seen_from`]).
+    map_seen_from: Arc<Vec<Vector3<f64>>>,
     map_raw_len: usize,
     coverage: Option<Arc<Coverage>>,
     pub attempts: usize,
@@ -462,6 +466,7 @@ impl RigCore {
             in_flight: false,
             start_hint: None,
             map: Arc::new(Vec::new()),
+            map_seen_from: Arc::new(Vec::new()),
             map_raw_len: 0,
             coverage: None,
             attempts: 0,
@@ -515,8 +520,15 @@ impl RigCore {
     /// The robot's map (already one point per voxel of `voxel_m`, in its world); replaces the
     /// previous one.
     pub fn set_map(&mut self, points: Vec<Vector3<f64>>) {
+        self.set_map_seen_from(points, Vec::new());
+    }
+
+    /// [`Self::set_map`] with, for each point, the direction from it towards the robot's
+    /// sensor that saw it (zero where not known; another length: none known).
+    pub fn set_map_seen_from(&mut self, points: Vec<Vector3<f64>>, towards_sensor: Vec<Vector3<f64>>) {
         self.map_raw_len = points.len();
         self.map = Arc::new(points);
+        self.map_seen_from = Arc::new(towards_sensor);
     }
 
     /// The robot's map as of the last [`Self::set_map`] (a new `Arc` each time).
@@ -647,6 +659,7 @@ impl RigCore {
             keep_window: !aligned && self.cfg.first_history_ns > 0,
             odom: self.odom.clone(),
             target: Arc::clone(&self.map),
+            target_seen_from: Arc::clone(&self.map_seen_from),
             coverage: self.coverage.clone(),
             config: self.job_config(aligned),
             lidar_pose,

@@ -110,8 +110,14 @@ impl RigSide {
     /// The robot's whole map (one point per voxel, in its world), replacing any before; from
     /// then on tiles are ignored.
     pub fn set_map_points(&mut self, points: Vec<Vector3<f64>>) {
+        self.set_map_points_seen_from(points, Vec::new());
+    }
+
+    /// [`Self::set_map_points`] with the direction from each point towards the robot's sensor
+    /// that saw it (see [`RigCore::set_map_seen_from`]).
+    pub fn set_map_points_seen_from(&mut self, points: Vec<Vector3<f64>>, towards_sensor: Vec<Vector3<f64>>) {
         self.map = MapFeed::Points;
-        self.core.set_map(points);
+        self.core.set_map_seen_from(points, towards_sensor);
     }
 
     /// The space the robot's rays crossed (see [`RigCore::set_coverage`]).
@@ -173,7 +179,8 @@ impl RigSide {
     pub fn next_job(&mut self) -> Option<AlignJob> {
         if let MapFeed::Tiles { tiles, changed } = &mut self.map {
             if *changed && self.core.wants_map() {
-                self.core.set_map(tiles.points().0);
+                let (points, towards_sensor) = tiles.points_seen_from();
+                self.core.set_map_seen_from(points, towards_sensor);
                 if let Some(coverage) = tiles.coverage() {
                     self.core.set_coverage(std::sync::Arc::new(coverage));
                 }

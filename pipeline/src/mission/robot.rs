@@ -326,6 +326,13 @@ impl RobotCore {
         self.map.points()
     }
 
+    /// [`Self::map_points`] and, for each, the direction towards the sensor that first saw it
+    /// (see [`RobotMap::points_seen_from`]).
+    pub fn map_points_seen_from(&mut self) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+        self.flush_map();
+        self.map.points_seen_from()
+    }
+
     /// The space the robot's rays crossed so far (see [`crate::align::coverage`]).
     pub fn map_coverage(&mut self) -> Arc<Coverage> {
         self.flush_map();

@@ -2,7 +2,7 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::{encode_tile, Coverage};
+use crate::align::{encode_tile_seen_from, Coverage};
 use crate::detect::WindowPoint;
 use crate::voxel_hash::key_of;
 use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
@@ -36,11 +36,20 @@ pub struct RobotMapConfig {
     pub tile_step_m: f64,
 }
 
+/// A tile's points (one per voxel) and, for each, the unit vector from it towards the sensor
+/// that first saw it (zero where not known): which side of a wall the robot saw, so that the
+/// rig does not pair the wall's other face with it (see [`crate::align::SeenFrom`]).
+#[derive(Default)]
+struct TilePoints {
+    points: Vec<Vector3<f64>>,
+    towards_sensor: Vec<Vector3<f64>>,
+}
+
 pub struct RobotMap {
     cfg: RobotMapConfig,
     /// Occupied voxels, and each tile's points (one per voxel).
     voxels: VoxelHashSet<VoxelKey>,
-    tiles: VoxelHashMap<VoxelKey, Vec<Vector3<f64>>>,
+    tiles: VoxelHashMap<VoxelKey, TilePoints>,
     dirty_tiles: VoxelHashSet<VoxelKey>,
     tile_version: u32,
     coverage: Arc<Coverage>,
@@ -75,7 +84,7 @@ impl RobotMap {
     /// Adds a placed scan: the first point of each new voxel is kept, and a sample of its rays
     /// grows the coverage.
     pub fn add_scan(&mut self, scan: &MapScan) {
-        self.add(&scan.points);
+        self.add_seen_from(&scan.points, Some(&scan.origin_m));
         if self.cfg.coverage_ray_stride == 0 {
             return;
         }
@@ -99,13 +108,22 @@ impl RobotMap {
 
     /// Adds a placed scan's points (world frame): the first point of each new voxel is kept.
     pub fn add(&mut self, points: &[WindowPoint]) {
+        self.add_seen_from(points, None);
+    }
+
+    /// [`Self::add`], each new point also keeping the direction towards `sensor` when given.
+    fn add_seen_from(&mut self, points: &[WindowPoint], sensor: Option<&Vector3<f64>>) {
         let per_tile = self.voxels_per_tile();
         let inv_voxel_m = 1.0 / self.cfg.voxel_m;
         for p in points {
-            let key = key_of(&p.xyz(), inv_voxel_m);
+            let xyz = p.xyz();
+            let key = key_of(&xyz, inv_voxel_m);
             if self.voxels.insert(key) {
                 let tile = (key.0.div_euclid(per_tile), key.1.div_euclid(per_tile), key.2.div_euclid(per_tile));
-                self.tiles.entry(tile).or_default().push(p.xyz());
+                let towards = sensor.and_then(|o| (o - xyz).try_normalize(1e-9)).unwrap_or_else(Vector3::zeros);
+                let t = self.tiles.entry(tile).or_default();
+                t.points.push(xyz);
+                t.towards_sensor.push(towards);
                 self.dirty_tiles.insert(tile);
             }
         }
@@ -117,7 +135,15 @@ impl RobotMap {
 
     /// The whole map (one point per voxel), in the robot's world.
     pub fn points(&self) -> Vec<Vector3<f64>> {
-        self.tiles.values().flatten().copied().collect()
+        self.tiles.values().flat_map(|t| &t.points).copied().collect()
+    }
+
+    /// [`Self::points`] and, in the same order, the unit vector from each towards the sensor
+    /// that first saw it (zero where not known).
+    pub fn points_seen_from(&self) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+        let points = self.points();
+        let towards = self.tiles.values().flat_map(|t| &t.towards_sensor).copied().collect();
+        (points, towards)
     }
 
     /// Occupied voxels.
@@ -142,13 +168,15 @@ impl RobotMap {
         let edge_m = f64::from(per_tile) * self.cfg.voxel_m;
         let min = self.cfg.tile_coverage_min_crossings;
         let coverage = (min > 0).then_some((self.coverage.as_ref(), min));
-        let none = Vec::new();
+        let none = TilePoints::default();
         dirty
             .into_iter()
             .map(|key| {
-                let points = self.tiles.get(&key).unwrap_or(&none);
-                let normals = vec![None; points.len()];
-                encode_tile(key, points, &normals, edge_m, self.cfg.tile_step_m, self.tile_version, coverage)
+                let tile = self.tiles.get(&key).unwrap_or(&none);
+                let towards: Vec<Option<Vector3<f64>>> =
+                    tile.towards_sensor.iter().map(|d| (d.norm() > 0.0).then_some(*d)).collect();
+                let (step_m, version) = (self.cfg.tile_step_m, self.tile_version);
+                encode_tile_seen_from(key, &tile.points, &towards, edge_m, step_m, version, coverage)
             })
             .collect()
     }
