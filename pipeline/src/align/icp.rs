@@ -52,15 +52,6 @@ struct Pair {
     r: f64,
 }
 
-/// The source points' mean directions towards their sensors, when pairs are judged by them
-/// (empty otherwise).
-fn source_seen_from(target: &IcpTarget, source: &[Vec3], p: &IcpParams) -> Vec<Vec3> {
-    if p.opposite_min_side <= 0.0 || target.seen_from.is_empty() || p.source_seen_from.is_empty() {
-        return Vec::new();
-    }
-    source.iter().map(|s| p.source_seen_from.at(s)).collect()
-}
-
 fn correspondences(
     target: &IcpTarget,
     source: &[Vec3],
@@ -120,7 +111,8 @@ pub fn settle_along(
 ) -> Isometry3<f64> {
     let mut pose = *pose;
     let every = IcpParams { trim_ratio: 1.0, ..*p };
-    let seen = source_seen_from(target, source, p);
+    let seen =
+        if target.seen_from.is_empty() { Vec::new() } else { p.source_seen_from.at_each(source, p.opposite_min_side) };
     let mut pairs = Vec::with_capacity(source.len());
     for _ in 0..p.max_iterations {
         correspondences(target, source, &seen, &pose, &every, &mut pairs);
@@ -162,7 +154,8 @@ fn jacobian(q: &Vec3, n: &Vec3) -> Vector6<f64> {
 
 pub fn refine(target: &IcpTarget, source: &[Vec3], pose: Isometry3<f64>, p: &IcpParams) -> IcpResult {
     let mut pose = pose;
-    let seen = source_seen_from(target, source, p);
+    let seen =
+        if target.seen_from.is_empty() { Vec::new() } else { p.source_seen_from.at_each(source, p.opposite_min_side) };
     let mut pairs = Vec::with_capacity(source.len());
     let mut iterations = 0;
     let mut update_norm = f64::INFINITY;

@@ -45,9 +45,7 @@ pub use register::{
 };
 pub use rejection::{slide_words, AlignFailure, Reasons, Rejection};
 pub use seen_from::SeenFrom;
-pub use tiles::{
-    decode_tile, encode_tile, encode_tile_seen_from, encode_tiles, Tile, TileCoverage, TileMap, MAX_TILE_POINTS,
-};
+pub use tiles::{decode_tile, encode_tile, encode_tiles, Tile, TileCoverage, TileMap, TileVectors, MAX_TILE_POINTS};
 
 #[cfg(test)]
 mod tests;

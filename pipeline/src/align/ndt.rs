@@ -77,15 +77,6 @@ impl NdtGrid {
         Self { inv_cell_m, cells, d1, d2, opposite_min_side }
     }
 
-    /// The source points' mean directions towards their sensors (in the source's frame), where
-    /// this grid judges sides (empty otherwise).
-    fn sides_of(&self, source: &[Vec3], seen: &SeenFrom) -> Vec<Vec3> {
-        if self.opposite_min_side <= 0.0 || seen.is_empty() {
-            return Vec::new();
-        }
-        source.iter().map(|p| seen.at(p)).collect()
-    }
-
     pub fn cell_count(&self) -> usize {
         self.cells.len()
     }
@@ -169,7 +160,7 @@ pub fn refine_level(
 ) -> LevelResult {
     let mut pose = pose;
     let mut iterations = 0;
-    let sides = grid.sides_of(source, seen);
+    let sides = seen.at_each(source, grid.opposite_min_side);
     let (mut score, _) = grid.evaluate(source, &sides, &pose, None);
     for _ in 0..max_iterations {
         iterations += 1;

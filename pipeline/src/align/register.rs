@@ -270,11 +270,15 @@ impl Aligner {
         config.validate()?;
         let t0 = config.stopwatch.start();
         let sides_known = towards_sensor.len() == target.len() && config.icp_opposite_min_side > 0.0;
-        let (ndt_target, ndt_sides) = if sides_known {
-            reduce_by_side(target, towards_sensor, config.ndt_target_voxel_m)
-        } else {
-            (voxel_downsample(target, config.ndt_target_voxel_m), Vec::new())
+        // Each voxel's sides kept apart where they are known; their mean directions beside.
+        let reduce = |voxel_m: f64| {
+            if sides_known {
+                reduce_by_side(target, towards_sensor, voxel_m)
+            } else {
+                (voxel_downsample(target, voxel_m), Vec::new())
+            }
         };
+        let (ndt_target, ndt_sides) = reduce(config.ndt_target_voxel_m);
         let grids: Vec<NdtGrid> = config
             .ndt_resolutions_m
             .iter()
@@ -282,11 +286,7 @@ impl Aligner {
                 NdtGrid::new_sided(&ndt_target, &ndt_sides, r, config.ndt_outlier_ratio, config.icp_opposite_min_side)
             })
             .collect();
-        let (icp_points, seen_from) = if sides_known {
-            reduce_by_side(target, towards_sensor, config.icp_voxel_m)
-        } else {
-            (voxel_downsample(target, config.icp_voxel_m), Vec::new())
-        };
+        let (icp_points, seen_from) = reduce(config.icp_voxel_m);
         let normals = estimate_normals(&icp_points, config.normal_radius_m, config.normal_neighbours);
         let surfels = if config.free_space_rays > 0 {
             SurfelGrid::new(&icp_points, &normals, config.icp_voxel_m)

@@ -32,15 +32,6 @@ impl SeenFrom {
         s
     }
 
-    /// `points[i]` seen from the direction `towards_sensor[i]` (any length; zero: unknown).
-    pub fn from_points(points: &[Vec3], towards_sensor: &[Vec3], voxel_m: f64) -> Self {
-        let mut s = Self::new(voxel_m);
-        for (p, d) in points.iter().zip(towards_sensor) {
-            s.add(p, d);
-        }
-        s
-    }
-
     /// A point seen from the direction `towards_sensor`; a zero or non-finite one is skipped.
     pub fn add(&mut self, point: &Vec3, towards_sensor: &Vec3) {
         let Some(unit) = towards_sensor.try_normalize(1e-9) else { return };
@@ -60,6 +51,15 @@ impl SeenFrom {
     /// seen). Seen from both sides alike, it comes out short or zero.
     pub fn at(&self, p: &Vec3) -> Vec3 {
         self.sums.get(&key_of(p, self.inv_voxel_m)).map_or_else(Vec3::zeros, |(sum, n)| sum / f64::from((*n).max(1)))
+    }
+
+    /// [`Self::at`] of each point, in order; empty where nothing was seen (sides unknown), and
+    /// where `min_side` is 0 (sides not judged).
+    pub fn at_each(&self, points: &[Vec3], min_side: f64) -> Vec<Vec3> {
+        if min_side <= 0.0 || self.is_empty() {
+            return Vec::new();
+        }
+        points.iter().map(|p| self.at(p)).collect()
     }
 }
 

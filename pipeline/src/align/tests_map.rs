@@ -150,10 +150,9 @@ fn tiles_round_trip_and_newer_versions_win() {
 
 #[test]
 fn tiles_carry_the_side_each_point_was_seen_from() {
-    use crate::align::encode_tile_seen_from;
     let pts = vec![Vec3::new(0.5, 0.5, 0.5), Vec3::new(1.0, 2.0, 3.0)];
     let towards = [Some(Vec3::new(-3.0, 0.0, 4.0)), None];
-    let b = encode_tile_seen_from((0, 0, 0), &pts, &towards, 4.0, 0.01, 5, None).unwrap();
+    let b = encode_tile((0, 0, 0), &pts, TileVectors::TowardsSensor(&towards), 4.0, 0.01, 5, None).unwrap();
     let t = decode_tile(&b).unwrap();
     assert_eq!(t.normals, vec![None, None]);
     let d = t.towards_sensor[0].unwrap();
@@ -165,8 +164,16 @@ fn tiles_carry_the_side_each_point_was_seen_from() {
     assert_eq!((p.len(), towards[1]), (2, Vec3::zeros()));
     // Normals stay normals; a vectors field other than 0 or 1 is refused.
     let n = decode_tile(
-        &encode_tile((0, 0, 0), &pts, &towards.iter().map(|d| Some(*d)).collect::<Vec<_>>(), 4.0, 0.01, 5, None)
-            .unwrap(),
+        &encode_tile(
+            (0, 0, 0),
+            &pts,
+            TileVectors::Normals(&towards.iter().map(|d| Some(*d)).collect::<Vec<_>>()),
+            4.0,
+            0.01,
+            5,
+            None,
+        )
+        .unwrap(),
     )
     .unwrap();
     assert!(n.normals[0].is_some() && n.towards_sensor.iter().all(Option::is_none));
@@ -213,7 +220,7 @@ fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
     }
     cov.add_ray(&Vec3::new(0.1, 2.1, 1.1), &Vec3::new(3.0, 2.1, 1.1));
     let pts = vec![Vec3::new(3.0, 0.6, 1.1)];
-    let good = encode_tile((0, 0, 0), &pts, &[None], 4.0, 0.01, 3, Some((&cov, 2))).unwrap();
+    let good = encode_tile((0, 0, 0), &pts, TileVectors::Normals(&[None]), 4.0, 0.01, 3, Some((&cov, 2))).unwrap();
     assert_eq!(good.len(), 32 + 10 + 8 + 512 + 4, "16^3 voxels: 512 bytes");
     let t = decode_tile(&good).unwrap();
     let c = t.coverage.clone().unwrap();
@@ -229,7 +236,9 @@ fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
     assert_eq!(rebuilt.crossings(&Vec3::new(1.0, 2.1, 1.1)), 0);
     assert_eq!(rebuilt.crossings(&Vec3::new(-0.5, 0.6, 1.1)), 0, "another tile's");
     // A negative tile keys its voxels below zero.
-    let neg = decode_tile(&encode_tile((-1, 0, 0), &[], &[], 4.0, 0.01, 3, Some((&cov, 2))).unwrap()).unwrap();
+    let neg =
+        decode_tile(&encode_tile((-1, 0, 0), &[], TileVectors::Normals(&[]), 4.0, 0.01, 3, Some((&cov, 2))).unwrap())
+            .unwrap();
     assert_eq!(neg.coverage.unwrap().voxels.len(), 4, "x -1 to 0");
     // Truncations and bit flips are errors; so are pad bits or sizes that do not tile, even
     // under a right CRC.
@@ -244,12 +253,15 @@ fn coverage_tiles_carry_the_crossed_voxels_and_refuse_damage() {
     let mut voxel = good.clone();
     voxel[42..44].copy_from_slice(&300u16.to_le_bytes());
     assert!(decode_tile(&resealed(voxel)).is_err(), "4 m is no whole number of 0.3 m voxels");
-    let mut odd = encode_tile((0, 0, 0), &[], &[], 0.75, 0.01, 1, Some((&Coverage::new(0.25), 1))).unwrap();
+    let mut odd =
+        encode_tile((0, 0, 0), &[], TileVectors::Normals(&[]), 0.75, 0.01, 1, Some((&Coverage::new(0.25), 1))).unwrap();
     assert!(decode_tile(&odd).is_ok());
     let pad = odd.len() - 5;
     odd[pad] |= 0x80;
     assert!(decode_tile(&resealed(odd)).is_err(), "27 voxels: the pad bits must be 0");
-    assert!(encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&Coverage::new(0.3), 2))).is_err());
+    assert!(
+        encode_tile((0, 0, 0), &[], TileVectors::Normals(&[]), 4.0, 0.01, 1, Some((&Coverage::new(0.3), 2))).is_err()
+    );
 }
 
 #[test]
@@ -257,13 +269,22 @@ fn a_coverage_tile_whose_voxel_keys_would_overflow_is_refused() {
     use crate::align::{encode_tile, Coverage};
     let cov = Coverage::new(0.25);
     // Tile keys this far out have no i32 voxel keys at 16 voxels per edge.
-    assert!(encode_tile((i32::MAX / 4, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).is_err());
-    let good = encode_tile((0, 0, 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
+    assert!(encode_tile((i32::MAX / 4, 0, 0), &[], TileVectors::Normals(&[]), 4.0, 0.01, 1, Some((&cov, 2))).is_err());
+    let good = encode_tile((0, 0, 0), &[], TileVectors::Normals(&[]), 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
     let mut far = good.clone();
     far[12..16].copy_from_slice(&(i32::MAX / 4).to_le_bytes());
     assert!(decode_tile(&resealed(far)).is_err());
     // At the edge of the range it still decodes.
-    let edge = encode_tile((i32::MAX / 16 - 1, -(i32::MAX / 16), 0), &[], &[], 4.0, 0.01, 1, Some((&cov, 2))).unwrap();
+    let edge = encode_tile(
+        (i32::MAX / 16 - 1, -(i32::MAX / 16), 0),
+        &[],
+        TileVectors::Normals(&[]),
+        4.0,
+        0.01,
+        1,
+        Some((&cov, 2)),
+    )
+    .unwrap();
     assert!(decode_tile(&edge).is_ok());
 }
 

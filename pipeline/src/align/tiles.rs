@@ -55,6 +55,16 @@ const CRC_LEN: usize = 4;
 pub const MAX_TILE_POINTS: u32 = 1 << 20;
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
+/// What a tile's per-point vectors are (the header's `vectors`), with them: one per point,
+/// None where there is none.
+#[derive(Clone, Copy, Debug)]
+pub enum TileVectors<'a> {
+    /// Surface normals (a prepared map's).
+    Normals(&'a [Option<Vec3>]),
+    /// The direction from each point towards the sensor that first saw it (the robot's map).
+    TowardsSensor(&'a [Option<Vec3>]),
+}
+
 /// One decoded tile.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tile {
@@ -123,57 +133,27 @@ pub fn encode_tiles(
         let chunk = tiles.get(&key).map_or(&[][..], Vec::as_slice);
         let pts: Vec<Vec3> = chunk.iter().filter_map(|&i| points.get(i).copied()).collect();
         let nrm: Vec<Option<Vec3>> = chunk.iter().map(|&i| normals.get(i).copied().flatten()).collect();
-        out.push((key, encode_tile(key, &pts, &nrm, edge_m, step_m, version, None)?));
+        out.push((key, encode_tile(key, &pts, TileVectors::Normals(&nrm), edge_m, step_m, version, None)?));
     }
     Ok(out)
 }
 
-/// One tile `key` of `edge_m` holding `points` (all inside it; with `normals`, same length) at
-/// `step_m` quantization; with `coverage` (the robot's, and the crossings a voxel needs) in
+/// One tile `key` of `edge_m` holding `points` (all inside it; with `vectors`, one per point)
+/// at `step_m` quantization; with `coverage` (the robot's, and the crossings a voxel needs) in
 /// format 2.
 pub fn encode_tile(
     key: Key,
     points: &[Vec3],
-    normals: &[Option<Vec3>],
+    vectors: TileVectors,
     edge_m: f64,
     step_m: f64,
     version: u32,
     coverage: Option<(&Coverage, u16)>,
 ) -> Result<Vec<u8>, PipelineError> {
-    let vectors = Vectors { values: normals, kind: VECTORS_NORMALS };
-    encode(key, points, vectors, edge_m, step_m, version, coverage)
-}
-
-/// [`encode_tile`] with, for each point, the direction from it towards the sensor that saw it
-/// in place of a normal (vectors 1).
-pub fn encode_tile_seen_from(
-    key: Key,
-    points: &[Vec3],
-    towards_sensor: &[Option<Vec3>],
-    edge_m: f64,
-    step_m: f64,
-    version: u32,
-    coverage: Option<(&Coverage, u16)>,
-) -> Result<Vec<u8>, PipelineError> {
-    let vectors = Vectors { values: towards_sensor, kind: VECTORS_TOWARDS_SENSOR };
-    encode(key, points, vectors, edge_m, step_m, version, coverage)
-}
-
-/// A tile's per-point vectors and what they are (the header's `vectors`).
-struct Vectors<'a> {
-    values: &'a [Option<Vec3>],
-    kind: u16,
-}
-
-fn encode(
-    key: Key,
-    points: &[Vec3],
-    vectors: Vectors,
-    edge_m: f64,
-    step_m: f64,
-    version: u32,
-    coverage: Option<(&Coverage, u16)>,
-) -> Result<Vec<u8>, PipelineError> {
+    let (values, kind) = match vectors {
+        TileVectors::Normals(v) => (v, VECTORS_NORMALS),
+        TileVectors::TowardsSensor(v) => (v, VECTORS_TOWARDS_SENSOR),
+    };
     let (edge_cm, step_mm) = tile_sizes(edge_m, step_m)?;
     let (edge_m, step_m) = (edge_cm / 100.0, step_mm / 1000.0);
     if points.len() > MAX_TILE_POINTS as usize {
@@ -185,7 +165,7 @@ fn encode(
     b.extend_from_slice(&format.to_le_bytes());
     b.extend_from_slice(&(edge_cm as u16).to_le_bytes());
     b.extend_from_slice(&(step_mm as u16).to_le_bytes());
-    b.extend_from_slice(&vectors.kind.to_le_bytes());
+    b.extend_from_slice(&kind.to_le_bytes());
     for k in [key.0, key.1, key.2] {
         b.extend_from_slice(&k.to_le_bytes());
     }
@@ -198,7 +178,7 @@ fn encode(
             let q = (v / step_m).round().clamp(0.0, max_step) as u16;
             b.extend_from_slice(&q.to_le_bytes());
         }
-        let n = vectors.values.get(i).copied().flatten().filter(|n| n.iter().all(|v| v.is_finite()));
+        let n = values.get(i).copied().flatten().filter(|n| n.iter().all(|v| v.is_finite()));
         let n = n.and_then(|n| n.try_normalize(1e-12));
         for v in n.map_or([0.0; 3], |n| [n.x, n.y, n.z]) {
             b.push(((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8);

@@ -2,7 +2,7 @@
 //! the tiles changed since the last call encoded out (see [`crate::align::tiles`]). Separate
 //! from [`super::RobotCore`] so that a node can grow it off the live path.
 
-use crate::align::{encode_tile_seen_from, Coverage};
+use crate::align::{encode_tile, Coverage, TileVectors};
 use crate::detect::WindowPoint;
 use crate::voxel_hash::key_of;
 use crate::voxel_hash::{VoxelHashMap, VoxelHashSet};
@@ -141,8 +141,11 @@ impl RobotMap {
     /// [`Self::points`] and, in the same order, the unit vector from each towards the sensor
     /// that first saw it (zero where not known).
     pub fn points_seen_from(&self) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
-        let points = self.points();
-        let towards = self.tiles.values().flat_map(|t| &t.towards_sensor).copied().collect();
+        let (mut points, mut towards) = (Vec::with_capacity(self.len()), Vec::with_capacity(self.len()));
+        for t in self.tiles.values() {
+            points.extend_from_slice(&t.points);
+            towards.extend_from_slice(&t.towards_sensor);
+        }
         (points, towards)
     }
 
@@ -176,7 +179,7 @@ impl RobotMap {
                 let towards: Vec<Option<Vector3<f64>>> =
                     tile.towards_sensor.iter().map(|d| (d.norm() > 0.0).then_some(*d)).collect();
                 let (step_m, version) = (self.cfg.tile_step_m, self.tile_version);
-                encode_tile_seen_from(key, &tile.points, &towards, edge_m, step_m, version, coverage)
+                encode_tile(key, &tile.points, TileVectors::TowardsSensor(&towards), edge_m, step_m, version, coverage)
             })
             .collect()
     }
