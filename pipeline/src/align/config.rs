@@ -197,6 +197,10 @@ pub struct AlignConfig {
     pub free_space_step_m: f64,
     pub free_space_near_m: f64,
     pub free_space_end_margin_m: f64,
+    /// A crossing counts only this close to a point of the map (at `ndt_target_voxel_m`): a
+    /// surfel stands for a disc a cell wide, which a rack's open shelves are not (0: the
+    /// surfel alone).
+    pub free_space_point_m: f64,
     /// The clock of the report's compute times (not a setting of the file).
     #[serde(skip)]
     pub stopwatch: crate::timing::Stopwatch,
@@ -279,10 +283,11 @@ impl Default for AlignConfig {
             correlative_rival_min_known: 0.4,
             correlative_rival_margin: 0.05,
             free_space_rays: 400,
-            free_space_max_blocked: 0.1,
+            free_space_max_blocked: 0.05,
             free_space_step_m: 0.1,
             free_space_near_m: 0.5,
             free_space_end_margin_m: 0.3,
+            free_space_point_m: 0.06,
             stopwatch: crate::timing::Stopwatch::Wall,
         }
     }
@@ -362,7 +367,7 @@ impl AlignConfig {
         if self.verify_shift_m > 0.0 && self.verify_max_points == 0 {
             return bad("verify_max_points must be at least 1 when the consistency check is on");
         }
-        let free_space = [self.free_space_near_m, self.free_space_end_margin_m];
+        let free_space = [self.free_space_near_m, self.free_space_end_margin_m, self.free_space_point_m];
         if !(self.free_space_step_m.is_finite() && self.free_space_step_m > 0.0)
             || free_space.iter().any(|v| !(v.is_finite() && *v >= 0.0))
             || !(0.0..=1.0).contains(&self.free_space_max_blocked)

@@ -6,7 +6,7 @@
 
 use super::geometry::Vec3;
 use crate::timing::Stopwatch;
-use crate::voxel_hash::{key_of, KeyMap};
+use crate::voxel_hash::{key_of, KeyMap, NEIGHBOURS};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
@@ -61,6 +61,10 @@ pub struct SurfelGrid {
     inv_cell_m: f64,
     cell_m: f64,
     cells: KeyMap<Vec<Surfel>>,
+    /// With [`SurfelGrid::with_points`]: the map's points, bucketed by `near_m`, and that
+    /// distance. A crossing counts only this close to a point: a surfel stands for a cell-wide
+    /// disc, which the ends of a rack's posts and the gaps between its loads are not.
+    points: Option<(KeyMap<Vec<Vec3>>, f64)>,
 }
 
 impl SurfelGrid {
@@ -74,7 +78,30 @@ impl SurfelGrid {
                 cells.entry(key_of(p, inv_cell_m)).or_default().push(Surfel { centre: *p, normal: *n });
             }
         }
-        Self { inv_cell_m, cell_m, cells }
+        Self { inv_cell_m, cell_m, cells, points: None }
+    }
+
+    /// A crossing counts only within `near_m` of one of `points` (the map at a finer voxel than
+    /// the surfels'); a `near_m` that is not positive leaves the surfels alone to decide.
+    pub fn with_points(mut self, points: &[Vec3], near_m: f64) -> Self {
+        if near_m > 0.0 {
+            let mut cells: KeyMap<Vec<Vec3>> = KeyMap::default();
+            for p in points {
+                cells.entry(key_of(p, 1.0 / near_m)).or_default().push(*p);
+            }
+            self.points = Some((cells, near_m));
+        }
+        self
+    }
+
+    /// Whether a map point lies within the set distance of `at` (always, without points).
+    fn on_a_point(&self, at: &Vec3) -> bool {
+        let Some((cells, near_m)) = &self.points else { return true };
+        let (x, y, z) = key_of(at, 1.0 / near_m);
+        let near2 = near_m * near_m;
+        std::iter::once((0, 0, 0)).chain(NEIGHBOURS).any(|(dx, dy, dz)| {
+            cells.get(&(x + dx, y + dy, z + dz)).is_some_and(|ps| ps.iter().any(|p| (p - at).norm_squared() <= near2))
+        })
     }
 
     /// Whether the segment `a`-`b` (around sample `at`) passes through a surfel of `at`'s voxel
@@ -90,7 +117,9 @@ impl SurfelGrid {
             }
             let crossing = a + (b - a) * (da / (da - db));
             let behind_m = -(end - s.centre).dot(&s.normal) * da.signum();
-            behind_m > margin_m && (crossing - s.centre).norm_squared() <= self.cell_m * self.cell_m
+            behind_m > margin_m
+                && (crossing - s.centre).norm_squared() <= self.cell_m * self.cell_m
+                && self.on_a_point(&crossing)
         })
     }
 
@@ -207,5 +236,57 @@ mod tests {
             .collect();
         let r = grid.check(&rays, &Isometry3::identity(), &params());
         assert_eq!((r.rays, r.blocked), (100, 100));
+    }
+
+    /// Posts 4 cm wide every 0.5 m, as the map holds them: a surfel per post (normal along x)
+    /// and its points at 2 cm.
+    fn posts(x_m: f64) -> (Vec<Vec3>, Vec<Option<Vec3>>, Vec<Vec3>) {
+        let centres: Vec<Vec3> = (-4..4).map(|k| Vec3::new(x_m, f64::from(k) * 0.5 + 0.06, 1.125)).collect();
+        let normals = centres.iter().map(|_| Some(Vec3::new(-1.0, 0.0, 0.0))).collect();
+        let fine = centres
+            .iter()
+            .flat_map(|c| {
+                (-1..=1).flat_map(move |dy| {
+                    (-12..=12).map(move |dz| c + Vec3::new(0.0, f64::from(dy) * 0.02, f64::from(dz) * 0.02))
+                })
+            })
+            .collect();
+        (centres, normals, fine)
+    }
+
+    #[test]
+    fn a_ray_through_the_gap_beside_a_post_is_blocked_only_without_the_maps_points() {
+        let (centres, normals, fine) = posts(5.0);
+        // Through the gap 0.12 m beside a post (inside its surfel's disc and cell), to a wall 3 m
+        // behind.
+        let beside = Ray { origin: Vec3::new(0.0, 0.2, 1.125), end: Vec3::new(8.0, 0.2, 1.125) };
+        let surfels_only = SurfelGrid::new(&centres, &normals, 0.25);
+        assert_eq!(surfels_only.check(&[beside], &Isometry3::identity(), &params()).blocked, 1);
+        let with_points = SurfelGrid::new(&centres, &normals, 0.25).with_points(&fine, 0.06);
+        assert_eq!(with_points.check(&[beside], &Isometry3::identity(), &params()).blocked, 0);
+        // Through the post itself it is blocked either way; a distance of 0 leaves the surfels
+        // alone to decide.
+        let through = Ray { origin: Vec3::new(0.0, 0.06, 1.125), end: Vec3::new(8.0, 0.06, 1.125) };
+        assert_eq!(with_points.check(&[through], &Isometry3::identity(), &params()).blocked, 1);
+        let off = SurfelGrid::new(&centres, &normals, 0.25).with_points(&fine, 0.0);
+        assert_eq!(off.check(&[beside], &Isometry3::identity(), &params()).blocked, 1);
+    }
+
+    #[test]
+    fn a_solid_wall_blocks_as_before_with_the_maps_points() {
+        let (points, normals) = wall(5.0);
+        // The wall's points at 0.1 m, as the map reduced for NDT holds them. A crossing amid four
+        // of them is 0.07 m from each and does not count (about a twentieth of a wall): these
+        // rays cross at a row's height.
+        let fine: Vec<Vec3> = (-20..20)
+            .flat_map(|iy| {
+                (0..30).map(move |iz| Vec3::new(5.0, f64::from(iy) * 0.1 + 0.05, f64::from(iz) * 0.1 + 0.05))
+            })
+            .collect();
+        let grid = SurfelGrid::new(&points, &normals, 0.25).with_points(&fine, 0.06);
+        let origin = Vec3::new(0.0, 0.0, 1.05);
+        let on: Vec<Ray> = (-5..=5).map(|k| Ray { origin, end: Vec3::new(5.03, f64::from(k) * 0.3, 1.05) }).collect();
+        assert_eq!(grid.check(&on, &Isometry3::identity(), &params()).blocked, 0);
+        assert_eq!(grid.check(&on, &pose_xyz_yaw(3.0, 0.0, 0.0, 0.0), &params()).blocked, 11);
     }
 }

@@ -290,6 +290,7 @@ impl Aligner {
         let normals = estimate_normals(&icp_points, config.normal_radius_m, config.normal_neighbours);
         let surfels = if config.free_space_rays > 0 {
             SurfelGrid::new(&icp_points, &normals, config.icp_voxel_m)
+                .with_points(&ndt_target, config.free_space_point_m)
         } else {
             SurfelGrid::new(&[], &[], config.icp_voxel_m)
         };
