@@ -88,6 +88,31 @@ fn eval_writes_rows_a_summary_and_plots() {
     assert!(!ok && text.contains("mixes development seeds"), "{text}");
 }
 
+/// `--no-wall-timing`: the rig's searches take no time, so two runs of one building write the
+/// same report, byte for byte; the live mode refuses it.
+#[test]
+fn eval_without_wall_timing_repeats_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str| {
+        let out = dir.path().join(name);
+        let args = ["eval", "--seeds", "17..17", "--offline", "--max-duration", "18", "--no-wall-timing", "--out"];
+        let (ok, text) = starc(&[&args[..], &[out.to_str().unwrap()]].concat());
+        assert!(ok, "{text}");
+        let eval: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
+        assert_eq!(eval["wall_timing"], false);
+        let family = eval["rows"][0]["family"].as_str().unwrap().to_string();
+        std::fs::read_to_string(out.join(format!("{family}-17/mission/report.json"))).unwrap()
+    };
+    let (a, b) = (run("a"), run("b"));
+    let report: serde_json::Value = serde_json::from_str(&a).unwrap();
+    assert!(report["alignment"].is_object(), "{report}");
+    assert!(a == b, "two runs without wall timing differ");
+    let out = dir.path().join("live");
+    let (ok, text) = starc(&["eval", "--seeds", "17..17", "--no-wall-timing", "--out", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("--no-wall-timing is for offline runs"), "{text}");
+}
+
 /// `starc dataset --clusters` on a short run of one development building: the four arrays numpy
 /// reads, a box per person per window, the cluster table, and the test seeds refused without
 /// `--test-set`.

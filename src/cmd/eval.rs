@@ -80,6 +80,11 @@ pub struct Args {
     /// setting on the generated buildings (report.json `rig_lio_error`).
     #[arg(long)]
     rig_lio_config: Option<PathBuf>,
+    /// Offline: compute times read 0 and peak memory is left out, so that a building's report
+    /// depends on its seed and the settings alone. Without it, the rig's searches take the time
+    /// they take on this machine, and its load moves which windows they see (as on the rig).
+    #[arg(long)]
+    no_wall_timing: bool,
 }
 
 /// An inclusive range of seeds.
@@ -122,6 +127,8 @@ struct EvalFile<'a> {
     family: String,
     mode: &'static str,
     hint: Hint,
+    /// Whether compute times were read from the wall clock (`--no-wall-timing`: not).
+    wall_timing: bool,
     wall_s: f64,
     jobs: usize,
     buildings: usize,
@@ -134,6 +141,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let SeedRange { first, last } = args.seeds;
     if args.no_align && !args.offline {
         bail!("--no-align is for offline runs");
+    }
+    if args.no_wall_timing && !args.offline {
+        bail!("--no-wall-timing is for offline runs (the live nodes run on the wall clock)");
     }
     if args.walker_min_height_m.is_some() && !args.offline {
         bail!("--walker-min-height-m is for offline runs (the live robot node takes its core's defaults)");
@@ -156,6 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         family: args.family.0.map_or_else(|| "any".to_string(), |f| f.to_string()),
         mode: if args.offline { "offline" } else { "live" },
         hint: args.hint,
+        wall_timing: !args.no_wall_timing,
         wall_s: started.elapsed().as_secs_f64(),
         jobs: jobs(&args),
         buildings: rows.len(),
@@ -289,7 +300,7 @@ fn mission_offline(dir: &Path, robot: &starc_hil::sim::scenario::Robot, out: &Pa
             rig_align: super::align::rig_align_config(args.align_config.as_deref())?,
             rig_lio: super::lio::rig_lio_config(args.rig_lio_config.as_deref())?,
             truth: Some(truth),
-            wall_timing: true,
+            wall_timing: !args.no_wall_timing,
             align: !args.no_align,
         },
     )?;
