@@ -65,13 +65,16 @@ pub struct RigCoreConfig {
     /// the rig is placed nowhere again and searches from scratch (0: never).
     pub lose_after_contradictions: u32,
     /// A first alignment is a candidate until independent searches (every `retry_ns`, each on
-    /// the rig's whole window so far) have found it again, without a refusal between them, over
-    /// at least this long; then it is applied (0: the first accepted search is applied at once).
+    /// the rig's whole window so far) have found it again, `confirm_min_searches` in all and
+    /// none finding another place between them, over at least this long; then it is applied (0:
+    /// the first accepted search is applied at once). A refused search between them leaves the
+    /// candidate standing: a window that decided nothing says nothing against it.
     /// A single attempt from the candidate would not do: it passes the tests wherever the window
     /// fits well enough, and a wrong candidate mostly does; it must stay the search's best.
     /// One window can fit a place it is not (a room like another, a flipped symmetric hall):
     /// such a coincidence rarely survives the rig's next metres.
     pub confirm_span_ns: u64,
+    pub confirm_min_searches: u32,
     /// Two searches agree when they place the rig's odometry frame within this of each other.
     pub confirm_agree_m: f64,
     pub confirm_agree_deg: f64,
@@ -161,6 +164,7 @@ impl Default for RigCoreConfig {
             start_gate_m: 2.0,
             lose_after_contradictions: 3,
             confirm_span_ns: (CONFIRM_FIRST_S * 1e9) as u64,
+            confirm_min_searches: 3,
             confirm_agree_m: 0.3,
             confirm_agree_deg: 3.0,
             view_keep_ns: 3_000_000_000,
@@ -728,7 +732,7 @@ impl RigCore {
             _ => Candidate { first_end_ns: end_ns, world_t_odom, searches: 1 },
         };
         let span_ns = end_ns.saturating_sub(c.first_end_ns);
-        if span_ns >= needed_ns {
+        if span_ns >= needed_ns && c.searches >= self.cfg.confirm_min_searches {
             self.candidate = None;
             return None;
         }
@@ -743,8 +747,6 @@ impl RigCore {
     fn refused(&mut self, tracking: bool, failure: AlignFailure) -> AlignVerdict {
         if !self.aligned() {
             self.waiting_for = Some(Waiting::from_failure(&failure));
-            // A candidate must be found by every search until confirmed.
-            self.candidate = None;
         }
         let contradicts = failure
             .because()
@@ -944,7 +946,7 @@ mod tests {
         assert_eq!(candidate(rig.confirm(5 * s, flipped)), 1);
         assert_eq!(candidate(rig.confirm(6 * s, here)), 1);
         assert_eq!(candidate(rig.confirm(7 * s, here)), 2);
-        // A refused search between them starts over.
+        // A refused search between them leaves the candidate standing.
         let refused = AlignFailure::NoneAccepted {
             attempts: 3,
             seeds: 12,
@@ -952,13 +954,16 @@ mod tests {
             because: vec![Rejection::Residual { rms_m: 0.2, max_m: 0.1 }],
         };
         assert!(matches!(rig.refused(false, refused), AlignVerdict::Refused(_)));
-        assert_eq!(candidate(rig.confirm(8 * s, here)), 1);
-        assert_eq!(candidate(rig.confirm(9 * s, here)), 2);
-        assert_eq!(candidate(rig.confirm(10 * s, here)), 3);
+        assert_eq!(candidate(rig.confirm(8 * s, here)), 3);
         rig.set_map(vec![Vector3::zeros(); 1001]);
         assert_eq!(rig.waiting(), super::Waiting::Confirming { searches: 3 });
-        // 3 s after the first: applied.
-        assert!(rig.confirm(11 * s, here).is_none());
+        // 3 s after the first (6 s), and three searches or more: applied.
+        assert!(rig.confirm(9 * s, here).is_none());
+        // The span alone does not do: two searches 5 s apart wait for a third.
+        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        assert_eq!(candidate(rig.confirm(3 * s, here)), 1);
+        assert_eq!(candidate(rig.confirm(8 * s, here)), 2);
+        assert!(rig.confirm(9 * s, here).is_none());
         let mut at_once = RigCore::new(RigCoreConfig { confirm_span_ns: 0, ..RigCoreConfig::default() }).unwrap();
         assert!(at_once.confirm(3 * s, flipped).is_none(), "0: the first is applied");
     }
