@@ -8,7 +8,7 @@
 //! [`refine_level`] does, with a backtracking step so the score never gets worse.
 
 use super::geometry::{exp_se3, Vec3};
-use super::seen_from::{seen_from_opposite_sides, side_class, SeenFrom};
+use super::seen_from::{seen_from_opposite_sides, unit_and_side, SeenFrom};
 use crate::voxel_hash::{key_of, KeyMap, VoxelHashMap};
 use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, Vector6};
 
@@ -52,11 +52,11 @@ impl NdtGrid {
         let sided = towards_sensor.len() == target.len();
         let mut buckets: VoxelHashMap<(crate::voxel_hash::Key, u8), (Vec<Vec3>, Vec3)> = VoxelHashMap::default();
         for (i, p) in target.iter().enumerate() {
-            let d = if sided { towards_sensor.get(i).and_then(|d| d.try_normalize(1e-9)) } else { None };
-            let d = d.unwrap_or_else(Vec3::zeros);
-            let e = buckets.entry((key_of(p, inv_cell_m), side_class(&d))).or_default();
+            let towards = if sided { towards_sensor.get(i).copied() } else { None };
+            let (unit, side) = unit_and_side(&towards.unwrap_or_else(Vec3::zeros));
+            let e = buckets.entry((key_of(p, inv_cell_m), side)).or_default();
             e.0.push(*p);
-            e.1 += d;
+            e.1 += unit;
         }
         let mut cells: KeyMap<Vec<Cell>> = KeyMap::default();
         let mut keys: Vec<_> = buckets.keys().copied().collect();
@@ -103,6 +103,13 @@ impl NdtGrid {
             let q = q.coords;
             let side = sides.get(k).map(|a| t.rotation * a);
             let (x, y, z) = key_of(&q, self.inv_cell_m);
+            // dq/dxi = [-[q]x | I], the same for every cell the point scores against.
+            let j = normal.is_some().then(|| {
+                let mut j = nalgebra::Matrix3x6::zeros();
+                j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
+                j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+                j
+            });
             let mut hit = false;
             for (dx, dy, dz) in NEIGHBOURS {
                 let Some(here) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy), z.saturating_add(dz)))
@@ -124,12 +131,8 @@ impl NdtGrid {
                     }
                     hit = true;
                     score += self.d1 * e;
-                    if let Some((h, g)) = normal.as_mut() {
+                    if let (Some((h, g)), Some(j)) = (normal.as_mut(), &j) {
                         let w = -self.d1 * self.d2 * e;
-                        // dq/dxi = [-[q]x | I]
-                        let mut j = nalgebra::Matrix3x6::zeros();
-                        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
-                        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
                         let ji = j.transpose() * cell.info;
                         **h += w * (ji * j);
                         **g += w * (ji * r);

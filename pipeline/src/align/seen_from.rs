@@ -75,6 +75,13 @@ pub fn side_class(d: &Vec3) -> u8 {
     }
 }
 
+/// `d` as a unit vector (zero where it is zero or not finite) and its [`side_class`]: the
+/// (voxel, side) buckets of [`reduce_by_side`] and of NDT's sided cells.
+pub fn unit_and_side(d: &Vec3) -> (Vec3, u8) {
+    let unit = d.try_normalize(1e-9).filter(|u| u.iter().all(|v| v.is_finite())).unwrap_or_else(Vec3::zeros);
+    (unit, side_class(&unit))
+}
+
 /// Points reduced to the mean of each voxel's points seen from one side (`towards_sensor[i]`
 /// from `points[i]`, zero where unknown), with the mean direction of each. The two faces of a
 /// wall thinner than a voxel stay two points, each on its own face: reduced together, their mean
@@ -86,8 +93,8 @@ pub fn reduce_by_side(points: &[Vec3], towards_sensor: &[Vec3], voxel_m: f64) ->
         if !p.iter().all(|v| v.is_finite()) {
             continue;
         }
-        let unit = d.try_normalize(1e-9).filter(|u| u.iter().all(|v| v.is_finite())).unwrap_or_else(Vec3::zeros);
-        let e = cells.entry((key_of(p, inv), side_class(&unit))).or_insert((Vec3::zeros(), Vec3::zeros(), 0));
+        let (unit, side) = unit_and_side(d);
+        let e = cells.entry((key_of(p, inv), side)).or_insert((Vec3::zeros(), Vec3::zeros(), 0));
         e.0 += p;
         e.1 += unit;
         e.2 += 1;

@@ -403,10 +403,8 @@ impl TileMap {
     /// sent counts as crossed its tile's `min_crossings` times. Tiles with another voxel size
     /// than the first are left out.
     pub fn coverage(&self) -> Option<Coverage> {
-        let mut keys: Vec<&Key> = self.tiles.keys().collect();
-        keys.sort_unstable();
         let mut out: Option<Coverage> = None;
-        for t in keys.into_iter().filter_map(|k| self.tiles.get(k)).filter_map(|t| t.coverage.as_ref()) {
+        for t in self.in_key_order().filter_map(|t| t.coverage.as_ref()) {
             let c = out.get_or_insert_with(|| Coverage::new(t.voxel_m));
             if (c.voxel_m() - t.voxel_m).abs() > 1e-9 {
                 continue;
@@ -421,27 +419,27 @@ impl TileMap {
     /// All points held, in tile-key order, and for each the direction towards the sensor that
     /// saw it (zero where the tile did not say).
     pub fn points_seen_from(&self) -> (Vec<Vec3>, Vec<Vec3>) {
-        let mut keys: Vec<&Key> = self.tiles.keys().collect();
-        keys.sort_unstable();
         let (mut pts, mut towards) = (Vec::new(), Vec::new());
-        for t in keys.into_iter().filter_map(|k| self.tiles.get(k)) {
+        for t in self.in_key_order() {
             pts.extend_from_slice(&t.points);
             towards.extend(t.towards_sensor.iter().map(|d| d.unwrap_or_else(Vec3::zeros)));
         }
         (pts, towards)
     }
 
-    /// All points and normals held, in tile-key order.
-    pub fn points(&self) -> (Vec<Vec3>, Vec<Option<Vec3>>) {
+    /// The tiles held, sorted by key (so that a map's points come out the same every time).
+    fn in_key_order(&self) -> impl Iterator<Item = &Tile> {
         let mut keys: Vec<&Key> = self.tiles.keys().collect();
         keys.sort_unstable();
-        let mut pts = Vec::new();
-        let mut nrm = Vec::new();
-        for k in keys {
-            if let Some(t) = self.tiles.get(k) {
-                pts.extend_from_slice(&t.points);
-                nrm.extend_from_slice(&t.normals);
-            }
+        keys.into_iter().filter_map(|k| self.tiles.get(k))
+    }
+
+    /// All points and normals held, in tile-key order.
+    pub fn points(&self) -> (Vec<Vec3>, Vec<Option<Vec3>>) {
+        let (mut pts, mut nrm) = (Vec::new(), Vec::new());
+        for t in self.in_key_order() {
+            pts.extend_from_slice(&t.points);
+            nrm.extend_from_slice(&t.normals);
         }
         (pts, nrm)
     }
