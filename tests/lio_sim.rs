@@ -213,3 +213,38 @@ fn lio_counts_itself_lost_after_a_long_blind_stretch_and_recovers() {
     assert!(out.last().is_some_and(|o| o.refused.is_none()), "tracking at the end");
     assert!(worst < 0.5, "no divergence: worst {worst} m");
 }
+
+/// Scans that barely weigh (their residuals taken as 3 m apart) leave the IMU to carry the
+/// pose: the filter's own position uncertainty grows past `[health] max_pos_sigma_m`, and those
+/// scans are reported degenerate, naming position axes, though every direction took an update.
+#[test]
+fn scans_that_hold_the_pose_loosely_are_not_called_tracking() {
+    let lab = lab();
+    let max = LioConfig::default().health.max_pos_sigma_m;
+    let (_, sound) = run_lio(LioConfig::default(), &lab.imu, lab.scans.clone());
+    let worst = sound.iter().map(|o| o.pos_sigma_m).fold(0.0, f64::max);
+    assert!(worst < max, "the clean run is sure of its position: {worst} m");
+    let loose = |max_pos_sigma_m: f64| {
+        let mut cfg = LioConfig::default();
+        cfg.update.residual_var_m2 = 10.0;
+        cfg.health.max_pos_sigma_m = max_pos_sigma_m;
+        run_lio(cfg, &lab.imu, lab.scans.clone()).1
+    };
+    let flagged = loose(max);
+    let unsure: Vec<&ScanOutput> = flagged.iter().filter(|o| o.refused.is_none() && o.pos_sigma_m > max).collect();
+    assert!(unsure.len() > 10, "{} scans over {max} m", unsure.len());
+    const POSITION_AXES: u8 = 0b111_000;
+    for o in &unsure {
+        assert_eq!(o.health, Health::Degenerate, "{o:?}");
+        assert!(o.update.weak_axes & POSITION_AXES != 0, "{o:?}");
+    }
+    // The check off: the same scans say tracking (the silent drift this check is for).
+    let unflagged = loose(0.0);
+    let silent = unflagged.iter().filter(|o| o.pos_sigma_m > max && o.health == Health::Tracking).count();
+    assert!(silent > 10, "{silent} scans");
+    println!(
+        "loose scans: {} of {} over {max} m, flagged degenerate; {silent} tracking with the check off",
+        unsure.len(),
+        flagged.len()
+    );
+}

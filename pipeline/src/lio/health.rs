@@ -8,6 +8,7 @@
 //! refused (the state keeps the IMU's prediction and the scan stays out of the map). Directions
 //! the scan does not constrain never take an update at all (see `update.rs`).
 
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -33,6 +34,12 @@ pub struct HealthConfig {
     /// carried it, so the uncertainty it propagated is the honest one; widened, the few matches
     /// of the first scan back move it as far as they like. Without wheels it always widens.
     pub blind_ride_widens: bool,
+    /// A scan that corrected the state is still `degenerate` where the filter's own 1-sigma
+    /// position uncertainty afterwards (the root of its covariance's trace) exceeds this: scans
+    /// weighed little (a small view on fine voxels, a loose fit) hold the pose loosely while
+    /// every direction still takes an update, and the error grows unseen (docs/lio.md, "Health
+    /// from the filter's own uncertainty"). 0: off.
+    pub max_pos_sigma_m: f64,
 }
 
 impl Default for HealthConfig {
@@ -45,6 +52,7 @@ impl Default for HealthConfig {
             max_correction_deg: 5.0,
             max_ride_s: 1.0,
             blind_ride_widens: false,
+            max_pos_sigma_m: 0.1,
         }
     }
 }
@@ -57,6 +65,7 @@ impl HealthConfig {
             ("health.max_correction_m", self.max_correction_m),
             ("health.max_correction_deg", self.max_correction_deg),
             ("health.max_ride_s", self.max_ride_s),
+            ("health.max_pos_sigma_m", self.max_pos_sigma_m),
         ];
         for (name, v) in finite {
             if !(v.is_finite() && v >= 0.0) {
@@ -74,7 +83,8 @@ pub enum Health {
     /// The scan corrected every direction of the pose.
     Tracking,
     /// The scan corrected the state, but some directions took no update (see
-    /// [`crate::lio::UpdateReport::weak_directions`]).
+    /// [`crate::lio::UpdateReport::weak_directions`]), or the filter stays unsure of its position
+    /// afterwards ([`uncertain_axes`]); `weak_axes` names them.
     Degenerate,
     /// The scan was refused; the IMU carries the state.
     ImuOnly,
@@ -105,6 +115,20 @@ impl Health {
             Self::Lost => "lost",
         }
     }
+}
+
+/// The position axes the filter is unsure of after a scan it accepted: `None` while its 1-sigma
+/// position uncertainty is within `max_pos_sigma_m` (or the check is off); otherwise the world
+/// axes (bits 3, 4, 5 of [`crate::lio::UpdateReport::weak_axes`]: x, y, z) that carry at least
+/// half the variance of the most uncertain one.
+pub fn uncertain_axes(cfg: &HealthConfig, pos_cov: &Matrix3<f64>) -> Option<u8> {
+    let sigma_m = pos_cov.trace().max(0.0).sqrt();
+    if cfg.max_pos_sigma_m <= 0.0 || sigma_m.is_nan() || sigma_m <= cfg.max_pos_sigma_m {
+        return None;
+    }
+    let var = pos_cov.diagonal();
+    let most = var.max();
+    Some((0..3).filter(|&k| var[k] >= 0.5 * most).fold(0u8, |m, k| m | (1 << (3 + k))))
 }
 
 /// Why a scan was refused.
@@ -245,6 +269,25 @@ mod tests {
         assert_eq!(m.judge(&cfg, 1_300_000_000, &poor).refused, Some(Refusal::PoorFit));
         let new_space = ScanFit { converged: true, ..poor };
         assert_eq!(m.judge(&cfg, 1_400_000_000, &new_space).refused, None);
+    }
+
+    #[test]
+    fn an_accepted_scan_is_degraded_where_the_filter_is_unsure_of_its_position() {
+        let cfg = HealthConfig::default();
+        // 3 cm each way: sure enough.
+        assert_eq!(uncertain_axes(&cfg, &Matrix3::from_diagonal_element(0.03f64.powi(2))), None);
+        // 12 cm along x, 3 cm across: unsure, along x.
+        let along_x =
+            Matrix3::from_diagonal(&nalgebra::Vector3::new(0.12f64.powi(2), 0.03f64.powi(2), 0.03f64.powi(2)));
+        assert_eq!(uncertain_axes(&cfg, &along_x), Some(1 << 3));
+        // 7 cm along x and y: 9.9 cm in all, within the limit; 8 cm along both: over it, both named.
+        let flat = |s: f64| Matrix3::from_diagonal(&nalgebra::Vector3::new(s * s, s * s, 0.0));
+        assert_eq!(uncertain_axes(&cfg, &flat(0.07)), None);
+        assert_eq!(uncertain_axes(&cfg, &flat(0.08)), Some((1 << 3) | (1 << 4)));
+        // Off.
+        let off = HealthConfig { max_pos_sigma_m: 0.0, ..cfg };
+        assert_eq!(uncertain_axes(&off, &along_x), None);
+        assert!(HealthConfig { max_pos_sigma_m: -1.0, ..HealthConfig::default() }.validate().is_err());
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The LIO front to back: static init, IMU propagation, de-skew, iterated update, map growth.
 
 use super::deskew::deskew;
-use super::health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
+use super::health::{uncertain_axes, Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::ivox::VoxelMap;
 use super::level::{level_update, LevelWindow};
@@ -465,18 +465,26 @@ impl Lio {
         if self.scans_done.is_multiple_of(10) {
             self.map.trim(&self.state.pos);
         }
-        let pos_var = (0..3).map(|i| self.cov[(POS + i, POS + i)]).sum::<f64>();
+        let pos_cov = self.cov.fixed_view::<3, 3>(POS, POS).into_owned();
+        let pos_var = pos_cov.trace();
         let yaw_var = {
             // Attitude error is in the IMU frame; world yaw is its projection on world z.
             let z = self.state.rot.inverse() * Vector3::z();
             let c = self.cov.fixed_view::<3, 3>(ROT, ROT);
             (z.transpose() * c * z)[(0, 0)]
         };
+        let mut health = verdict.map_or(Health::Tracking, |v| v.health).with_wheels(wheel == WheelUse::Applied);
+        if let (Health::Tracking | Health::Degenerate, Some(axes)) =
+            (health, uncertain_axes(&self.cfg.health, &pos_cov))
+        {
+            health = Health::Degenerate;
+            report.weak_axes |= axes;
+        }
         ScanOutput {
             end_ns: scan.end_ns,
             lidar_pose: self.state.lidar_pose(),
             update: report,
-            health: verdict.map_or(Health::Tracking, |v| v.health).with_wheels(wheel == WheelUse::Applied),
+            health,
             refused,
             pos_sigma_m: pos_var.max(0.0).sqrt(),
             yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),
