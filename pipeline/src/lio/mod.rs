@@ -28,7 +28,7 @@ mod update;
 mod wheel;
 
 pub use config::{ExtrinsicsSection, ImuSection, ImuSource, LioFile, MapSection, ScanSection, UpdateSection};
-pub use health::{Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
+pub use health::{uncertain_axes, Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 pub use init::{InitResult, InitStatus, StaticInit};
 pub use ivox::VoxelMap;
 pub use odometry::{Lio, LioConfig, LioStatus, ScanOutput};

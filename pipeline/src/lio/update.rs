@@ -72,7 +72,9 @@ pub struct UpdateReport {
     pub weak_directions: usize,
     /// Which axes those directions mostly lie along: bit k for axis k of the update's error
     /// state (rx, ry, rz: turns; x, y, z: moves) when more than half of that axis lies in the
-    /// weak directions (a corridor along x sets bit 3). [`weak_axes_names`] spells it out.
+    /// weak directions (a corridor along x sets bit 3). [`weak_axes_names`] spells it out. The
+    /// LIO's output adds the world position axes the filter stays unsure of after the scan
+    /// ([`crate::lio::uncertain_axes`]), which no update direction need be weak for.
     pub weak_axes: u8,
 }
 
