@@ -8,7 +8,7 @@
 //! refused (the state keeps the IMU's prediction and the scan stays out of the map). Directions
 //! the scan does not constrain never take an update at all (see `update.rs`).
 
-use nalgebra::Matrix3;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -106,6 +106,15 @@ impl Health {
         }
     }
 
+    /// A scan it accepted after which the filter is unsure of its position ([`uncertain_axes`]):
+    /// degenerate rather than tracking.
+    pub fn with_uncertainty(self, unsure: bool) -> Self {
+        match self {
+            Self::Tracking if unsure => Self::Degenerate,
+            other => other,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Tracking => "tracking",
@@ -117,18 +126,17 @@ impl Health {
     }
 }
 
-/// The position axes the filter is unsure of after a scan it accepted: `None` while its 1-sigma
-/// position uncertainty is within `max_pos_sigma_m` (or the check is off); otherwise the world
-/// axes (bits 3, 4, 5 of [`crate::lio::UpdateReport::weak_axes`]: x, y, z) that carry at least
-/// half the variance of the most uncertain one.
-pub fn uncertain_axes(cfg: &HealthConfig, pos_cov: &Matrix3<f64>) -> Option<u8> {
-    let sigma_m = pos_cov.trace().max(0.0).sqrt();
-    if cfg.max_pos_sigma_m <= 0.0 || sigma_m.is_nan() || sigma_m <= cfg.max_pos_sigma_m {
+/// The position axes the filter is unsure of after a scan: `None` while its 1-sigma position
+/// uncertainty `pos_sigma_m` (the root of the position covariance's trace) is within
+/// `max_pos_sigma_m` (or the check is off); otherwise the world axes (bits 3, 4, 5 of
+/// [`crate::lio::UpdateReport::weak_axes`]: x, y, z) whose variance (`pos_var`, the covariance's
+/// diagonal) is at least half that of the most uncertain one.
+pub fn uncertain_axes(cfg: &HealthConfig, pos_sigma_m: f64, pos_var: &Vector3<f64>) -> Option<u8> {
+    if cfg.max_pos_sigma_m <= 0.0 || pos_sigma_m.is_nan() || pos_sigma_m <= cfg.max_pos_sigma_m {
         return None;
     }
-    let var = pos_cov.diagonal();
-    let most = var.max();
-    Some((0..3).filter(|&k| var[k] >= 0.5 * most).fold(0u8, |m, k| m | (1 << (3 + k))))
+    let most = pos_var.max();
+    Some((0..3).filter(|&k| pos_var[k] >= 0.5 * most).fold(0u8, |m, k| m | (1 << (3 + k))))
 }
 
 /// Why a scan was refused.
@@ -274,20 +282,25 @@ mod tests {
     #[test]
     fn an_accepted_scan_is_degraded_where_the_filter_is_unsure_of_its_position() {
         let cfg = HealthConfig::default();
+        // The sigma is the root of the variances' sum, as the filter reports it.
+        let unsure = |var: Vector3<f64>| uncertain_axes(&cfg, var.sum().sqrt(), &var);
         // 3 cm each way: sure enough.
-        assert_eq!(uncertain_axes(&cfg, &Matrix3::from_diagonal_element(0.03f64.powi(2))), None);
+        assert_eq!(unsure(Vector3::repeat(0.03f64.powi(2))), None);
         // 12 cm along x, 3 cm across: unsure, along x.
-        let along_x =
-            Matrix3::from_diagonal(&nalgebra::Vector3::new(0.12f64.powi(2), 0.03f64.powi(2), 0.03f64.powi(2)));
-        assert_eq!(uncertain_axes(&cfg, &along_x), Some(1 << 3));
+        let along_x = Vector3::new(0.12f64.powi(2), 0.03f64.powi(2), 0.03f64.powi(2));
+        assert_eq!(unsure(along_x), Some(1 << 3));
         // 7 cm along x and y: 9.9 cm in all, within the limit; 8 cm along both: over it, both named.
-        let flat = |s: f64| Matrix3::from_diagonal(&nalgebra::Vector3::new(s * s, s * s, 0.0));
-        assert_eq!(uncertain_axes(&cfg, &flat(0.07)), None);
-        assert_eq!(uncertain_axes(&cfg, &flat(0.08)), Some((1 << 3) | (1 << 4)));
+        let flat = |s: f64| Vector3::new(s * s, s * s, 0.0);
+        assert_eq!(unsure(flat(0.07)), None);
+        assert_eq!(unsure(flat(0.08)), Some((1 << 3) | (1 << 4)));
         // Off.
-        let off = HealthConfig { max_pos_sigma_m: 0.0, ..cfg };
-        assert_eq!(uncertain_axes(&off, &along_x), None);
+        let off = HealthConfig { max_pos_sigma_m: 0.0, ..cfg.clone() };
+        assert_eq!(uncertain_axes(&off, along_x.sum().sqrt(), &along_x), None);
         assert!(HealthConfig { max_pos_sigma_m: -1.0, ..HealthConfig::default() }.validate().is_err());
+        // Only a scan that was accepted and tracked becomes degenerate.
+        assert_eq!(Health::Tracking.with_uncertainty(true), Health::Degenerate);
+        assert_eq!(Health::Tracking.with_uncertainty(false), Health::Tracking);
+        assert_eq!(Health::ImuOnly.with_uncertainty(true), Health::ImuOnly);
     }
 
     #[test]

@@ -465,20 +465,21 @@ impl Lio {
         if self.scans_done.is_multiple_of(10) {
             self.map.trim(&self.state.pos);
         }
-        let pos_cov = self.cov.fixed_view::<3, 3>(POS, POS).into_owned();
-        let pos_var = pos_cov.trace();
+        let pos_var = self.cov.fixed_view::<3, 3>(POS, POS).diagonal();
+        let pos_sigma_m = pos_var.sum().max(0.0).sqrt();
         let yaw_var = {
             // Attitude error is in the IMU frame; world yaw is its projection on world z.
             let z = self.state.rot.inverse() * Vector3::z();
             let c = self.cov.fixed_view::<3, 3>(ROT, ROT);
             (z.transpose() * c * z)[(0, 0)]
         };
-        let mut health = verdict.map_or(Health::Tracking, |v| v.health).with_wheels(wheel == WheelUse::Applied);
-        if let (Health::Tracking | Health::Degenerate, Some(axes)) =
-            (health, uncertain_axes(&self.cfg.health, &pos_cov))
-        {
-            health = Health::Degenerate;
-            report.weak_axes |= axes;
+        let unsure = uncertain_axes(&self.cfg.health, pos_sigma_m, &pos_var);
+        let health = verdict
+            .map_or(Health::Tracking, |v| v.health)
+            .with_wheels(wheel == WheelUse::Applied)
+            .with_uncertainty(unsure.is_some());
+        if health == Health::Degenerate {
+            report.weak_axes |= unsure.unwrap_or(0);
         }
         ScanOutput {
             end_ns: scan.end_ns,
@@ -486,7 +487,7 @@ impl Lio {
             update: report,
             health,
             refused,
-            pos_sigma_m: pos_var.max(0.0).sqrt(),
+            pos_sigma_m,
             yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),
             points_in: scan.points.len(),
             points_used: used.len(),

@@ -74,6 +74,8 @@ pub struct RigCoreConfig {
     /// One window can fit a place it is not (a room like another, a flipped symmetric hall):
     /// such a coincidence rarely survives the rig's next metres.
     pub confirm_span_ns: u64,
+    /// The searches that must have found a first alignment before it is applied (with
+    /// `confirm_span_ns`).
     pub confirm_min_searches: u32,
     /// Two searches agree when they place the rig's odometry frame within this of each other.
     pub confirm_agree_m: f64,
