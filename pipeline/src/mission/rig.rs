@@ -23,7 +23,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 /// How long a first alignment must be found again before it is used, by default (s).
-pub const CONFIRM_FIRST_S: f64 = 3.0;
+pub const CONFIRM_FIRST_S: f64 = 2.0;
 
 /// How the rig's side runs; the defaults are what `starc sim` measures.
 #[derive(Clone, Debug)]
@@ -934,7 +934,9 @@ mod tests {
         use super::AlignVerdict;
         use crate::align::{AlignFailure, Rejection};
         let s = 1_000_000_000;
-        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        // A 3 s span, whatever the default: the sequence below needs four searches to apply.
+        let three_s = RigCoreConfig { confirm_span_ns: 3 * s, ..RigCoreConfig::default() };
+        let mut rig = RigCore::new(three_s.clone()).unwrap();
         let here = pose_xyz_yaw(4.0, 2.0, 0.0, 30.0);
         let flipped = pose_xyz_yaw(9.0, 2.0, 0.0, -150.0);
         let candidate = |v: Option<AlignVerdict>| match v {
@@ -962,7 +964,7 @@ mod tests {
         // 3 s after the first (6 s), and three searches or more: applied.
         assert!(rig.confirm(9 * s, here).is_none());
         // The span alone does not do: two searches 5 s apart wait for a third.
-        let mut rig = RigCore::new(RigCoreConfig::default()).unwrap();
+        let mut rig = RigCore::new(three_s).unwrap();
         assert_eq!(candidate(rig.confirm(3 * s, here)), 1);
         assert_eq!(candidate(rig.confirm(8 * s, here)), 2);
         assert!(rig.confirm(9 * s, here).is_none());
