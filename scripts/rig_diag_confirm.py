@@ -24,8 +24,8 @@ import math
 import re
 import sys
 
-SEARCH = re.compile(r'== t\s+([\d.]+) s')
-ATTEMPT = re.compile(r'\s+att\d+ .*err\s+([\d.]+) m\s+([\d.]+) deg')
+from rig_diag_summary import ATTEMPT, SEARCH, kind
+
 FIT = re.compile(r'rms ([\d.]+|inf) inl ([\d.]+)')
 SUMMARY = re.compile(
     r'SUMMARY t\s+([\d.]+) acc (true|false) err\s+([\d.]+) m\s+([\d.]+) deg world_t_odom\s+([-+\d.]+)\s+([-+\d.]+)\s+([-+\d.]+)'
@@ -65,9 +65,9 @@ def read(path):
             if s:
                 best = chosen(attempts)
                 rival = best is not None and best[3]
-                kind = 'accepted' if s[2] == 'true' else ('rival' if rival else None)
-                right = float(s[3]) < 0.1 and float(s[4]) < 1.0
-                searches.append((float(s[1]), kind, right, float(s[5]), float(s[6]), float(s[7])))
+                outcome = 'accepted' if s[2] == 'true' else ('rival' if rival else None)
+                right = kind(float(s[3]), float(s[4])) == 'right'
+                searches.append((float(s[1]), outcome, right, float(s[5]), float(s[6]), float(s[7])))
     return searches
 
 
@@ -80,12 +80,12 @@ def replay(searches, span_s, min_searches, refusal_drops, weak):
     """(t, right) of the first candidate applied, or None."""
     cand = None  # (first t, last search, searches, rival-refused searches among them)
     for s in searches:
-        t, kind = s[0], s[1]
-        if kind is None or (kind == 'rival' and weak is None):
+        t, outcome = s[0], s[1]
+        if outcome is None or (outcome == 'rival' and weak is None):
             if refusal_drops:
                 cand = None
             continue
-        rival = 1 if kind == 'rival' else 0
+        rival = 1 if outcome == 'rival' else 0
         cand = (cand[0], s, cand[2] + 1, cand[3] + rival) if cand and agree(cand[1], s) else (t, s, 1, rival)
         need_span, need_n = (span_s, min_searches) if cand[3] == 0 else weak
         if t - cand[0] >= need_span and cand[2] >= need_n:

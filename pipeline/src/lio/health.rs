@@ -126,13 +126,20 @@ impl Health {
     }
 }
 
+/// The 1-sigma position uncertainty from the position variances (the covariance's diagonal):
+/// the root of their sum, as `ScanOutput::pos_sigma_m` reports it.
+pub fn pos_sigma_m(pos_var: &Vector3<f64>) -> f64 {
+    pos_var.sum().max(0.0).sqrt()
+}
+
 /// The position axes the filter is unsure of after a scan: `None` while its 1-sigma position
-/// uncertainty `pos_sigma_m` (the root of the position covariance's trace) is within
+/// uncertainty ([`pos_sigma_m`] of `pos_var`, the position covariance's diagonal) is within
 /// `max_pos_sigma_m` (or the check is off); otherwise the world axes (bits 3, 4, 5 of
-/// [`crate::lio::UpdateReport::weak_axes`]: x, y, z) whose variance (`pos_var`, the covariance's
-/// diagonal) is at least half that of the most uncertain one.
-pub fn uncertain_axes(cfg: &HealthConfig, pos_sigma_m: f64, pos_var: &Vector3<f64>) -> Option<u8> {
-    if cfg.max_pos_sigma_m <= 0.0 || pos_sigma_m.is_nan() || pos_sigma_m <= cfg.max_pos_sigma_m {
+/// [`crate::lio::UpdateReport::weak_axes`]: x, y, z) whose variance is at least half that of
+/// the most uncertain one.
+pub fn uncertain_axes(cfg: &HealthConfig, pos_var: &Vector3<f64>) -> Option<u8> {
+    let sigma_m = pos_sigma_m(pos_var);
+    if cfg.max_pos_sigma_m <= 0.0 || sigma_m.is_nan() || sigma_m <= cfg.max_pos_sigma_m {
         return None;
     }
     let most = pos_var.max();
@@ -282,8 +289,7 @@ mod tests {
     #[test]
     fn an_accepted_scan_is_degraded_where_the_filter_is_unsure_of_its_position() {
         let cfg = HealthConfig::default();
-        // The sigma is the root of the variances' sum, as the filter reports it.
-        let unsure = |var: Vector3<f64>| uncertain_axes(&cfg, var.sum().sqrt(), &var);
+        let unsure = |var: Vector3<f64>| uncertain_axes(&cfg, &var);
         // 3 cm each way: sure enough.
         assert_eq!(unsure(Vector3::repeat(0.03f64.powi(2))), None);
         // 12 cm along x, 3 cm across: unsure, along x.
@@ -295,7 +301,7 @@ mod tests {
         assert_eq!(unsure(flat(0.08)), Some((1 << 3) | (1 << 4)));
         // Off.
         let off = HealthConfig { max_pos_sigma_m: 0.0, ..cfg.clone() };
-        assert_eq!(uncertain_axes(&off, along_x.sum().sqrt(), &along_x), None);
+        assert_eq!(uncertain_axes(&off, &along_x), None);
         assert!(HealthConfig { max_pos_sigma_m: -1.0, ..HealthConfig::default() }.validate().is_err());
         // Only a scan that was accepted and tracked becomes degenerate.
         assert_eq!(Health::Tracking.with_uncertainty(true), Health::Degenerate);

@@ -1,7 +1,7 @@
 //! The LIO front to back: static init, IMU propagation, de-skew, iterated update, map growth.
 
 use super::deskew::deskew;
-use super::health::{uncertain_axes, Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
+use super::health::{pos_sigma_m, uncertain_axes, Health, HealthConfig, HealthMonitor, Refusal, ScanFit, Verdict};
 use super::init::{InitResult, InitStatus, StaticInit, DEFAULT_MAX_ACC_STD_M_S2, DEFAULT_MAX_GYRO_STD_RAD_S};
 use super::ivox::VoxelMap;
 use super::level::{level_update, LevelWindow};
@@ -466,14 +466,13 @@ impl Lio {
             self.map.trim(&self.state.pos);
         }
         let pos_var = self.cov.fixed_view::<3, 3>(POS, POS).diagonal();
-        let pos_sigma_m = pos_var.sum().max(0.0).sqrt();
         let yaw_var = {
             // Attitude error is in the IMU frame; world yaw is its projection on world z.
             let z = self.state.rot.inverse() * Vector3::z();
             let c = self.cov.fixed_view::<3, 3>(ROT, ROT);
             (z.transpose() * c * z)[(0, 0)]
         };
-        let unsure = uncertain_axes(&self.cfg.health, pos_sigma_m, &pos_var);
+        let unsure = uncertain_axes(&self.cfg.health, &pos_var);
         let health = verdict
             .map_or(Health::Tracking, |v| v.health)
             .with_wheels(wheel == WheelUse::Applied)
@@ -487,7 +486,7 @@ impl Lio {
             update: report,
             health,
             refused,
-            pos_sigma_m,
+            pos_sigma_m: pos_sigma_m(&pos_var),
             yaw_sigma_deg: yaw_var.max(0.0).sqrt().to_degrees(),
             points_in: scan.points.len(),
             points_used: used.len(),
