@@ -45,6 +45,14 @@ pub struct ImuSection {
     /// acceleration the filter sees (gravity and bias taken out) stayed under this RMS over the
     /// still window (0: only scans too sparse to match).
     pub still_max_acc_m_s2: f64,
+    /// That limit is widened by this many sigmas of the world acceleration's error the filter
+    /// expects from its own attitude, accelerometer bias and gravity (0: not widened): a bias the
+    /// still start took for gravity leaks into the world acceleration once the device has turned.
+    pub still_acc_sigmas: f64,
+    /// How much the world acceleration's change over the still window weighs against its mean
+    /// (1: the plain RMS). The filter's own errors are steady over half a second; a walk that
+    /// sets off ramps up.
+    pub still_change_weight: f64,
     /// The accelerometer's turn-on bias (1 sigma) that a still start takes for gravity: > 0
     /// ties the two in the filter's start (`lio::start`), 0 starts them apart.
     pub acc_bias_sigma_m_s2: f64,
@@ -67,6 +75,8 @@ impl Default for ImuSection {
             still_window_s: 0.5,
             still_sigma_m_s: 0.05,
             still_max_acc_m_s2: 0.0,
+            still_acc_sigmas: 0.0,
+            still_change_weight: 1.0,
             acc_bias_sigma_m_s2: 0.0,
             gyro_noise_rad_s: noise.gyro_rad_s,
             acc_noise_m_s2: noise.acc_m_s2,
@@ -316,6 +326,8 @@ impl LioFile {
         let non_negative = [
             ("imu.still_sigma_m_s", self.imu.still_sigma_m_s),
             ("imu.still_max_acc_m_s2", self.imu.still_max_acc_m_s2),
+            ("imu.still_acc_sigmas", self.imu.still_acc_sigmas),
+            ("imu.still_change_weight", self.imu.still_change_weight),
             ("update.fit_rms_ref_m", self.update.fit_rms_ref_m),
             ("imu.acc_bias_sigma_m_s2", self.imu.acc_bias_sigma_m_s2),
         ];
@@ -341,6 +353,8 @@ impl LioFile {
             still_window_ns: (self.imu.still_window_s * 1e9) as u64,
             still_sigma_m_s: self.imu.still_sigma_m_s,
             still_max_acc_m_s2: self.imu.still_max_acc_m_s2,
+            still_acc_sigmas: self.imu.still_acc_sigmas,
+            still_change_weight: self.imu.still_change_weight,
             acc_bias_sigma_m_s2: self.imu.acc_bias_sigma_m_s2,
             noise,
             update: UpdateConfig {

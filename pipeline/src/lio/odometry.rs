@@ -10,7 +10,7 @@ use super::scan_points::ScanReduction;
 use super::stand::{base_position, hold_update, stands};
 use super::start::start_covariance;
 use super::state::{Cov, State, POS, ROT, VEL};
-use super::still::{zero_velocity_update, StillWindow};
+use super::still::{acc_world_var, zero_velocity_update, StillWindow};
 use super::types::{Clock, ImuSample, LioScan};
 use super::update::{update, UpdateConfig, UpdateReport};
 use super::wheel::{mean_twist, wheel_update, WheelFusion, WheelSample, WheelUse};
@@ -34,6 +34,11 @@ pub struct LioConfig {
     /// Also on scans that matched, where the world acceleration the filter sees stayed under this
     /// RMS over the still window (0: only on unmatched scans; see [`super::still`]).
     pub still_max_acc_m_s2: f64,
+    /// That limit is widened by this many sigmas of the world-acceleration error the filter
+    /// expects from its own attitude, accelerometer bias and gravity (0: not widened).
+    pub still_acc_sigmas: f64,
+    /// The weight of the world acceleration's change over the window against its mean (1: RMS).
+    pub still_change_weight: f64,
     /// The accelerometer bias's spread that a still start cannot tell from gravity; > 0 ties the
     /// two in the start's uncertainty, 0 starts them apart (see [`super::start`]).
     pub acc_bias_sigma_m_s2: f64,
@@ -85,6 +90,8 @@ impl Default for LioConfig {
             still_window_ns: 500_000_000,
             still_sigma_m_s: 0.05,
             still_max_acc_m_s2: 0.0,
+            still_acc_sigmas: 0.0,
+            still_change_weight: 1.0,
             acc_bias_sigma_m_s2: 0.0,
             noise: ImuNoise::default(),
             update: UpdateConfig::default(),
@@ -438,7 +445,8 @@ impl Lio {
         // scan that matched holds it only where the filter also sees no acceleration: an IMU
         // cannot tell standing from gliding, and the first steps of a walk read as still.
         let unmatched = refused == Some(Refusal::TooFewMatches);
-        if wheel != WheelUse::Applied && (unmatched || self.still.quiet(self.cfg.still_max_acc_m_s2)) {
+        let quiet = self.still.quiet(self.quiet_limit_m_s2(), self.cfg.still_change_weight);
+        if wheel != WheelUse::Applied && (unmatched || quiet) {
             self.hold_if_still(scan.end_ns);
         }
         // A map too thin to match (the first scans, or a lost filter's) grows from the IMU's
@@ -551,6 +559,19 @@ impl Lio {
         }
     }
 
+    /// The world acceleration a still device may show: the configured limit, widened by what the
+    /// filter does not know of its attitude, accelerometer bias and gravity. After a turn, a bias
+    /// the still start took for gravity shows as a steady acceleration of up to twice the bias
+    /// (development hall-18: 0.13 m/s^2 standing after a turn on the spot, docs/lio.md).
+    fn quiet_limit_m_s2(&self) -> f64 {
+        let limit = self.cfg.still_max_acc_m_s2;
+        let (k, Some(held)) = (self.cfg.still_acc_sigmas, self.held) else { return limit };
+        if limit <= 0.0 || k <= 0.0 {
+            return limit;
+        }
+        (limit * limit + k * k * acc_world_var(&self.state, &self.cov, &held.acc_m_s2)).sqrt()
+    }
+
     /// A scan that could not be matched: where the IMU has been still, the velocity is held at
     /// zero rather than integrated on from the IMU's noise.
     fn hold_if_still(&mut self, end_ns: u64) {
@@ -627,11 +648,11 @@ mod tests {
         assert!(lio.state().is_finite());
     }
 
-    /// A wall 3 m ahead: the scans match and hold the distance to it, but not a slide along it.
-    /// Once the scans start, the accelerometer reads 0.08 m/s^2 along the wall that the still start
-    /// did not see (its bias shifting, a tilt the wall cannot show).
-    #[test]
-    fn a_still_device_whose_scans_match_holds_its_velocity_where_the_filter_sees_no_acceleration() {
+    /// A device standing 3 m before a wall for 3 s: the scans match and hold the distance to it,
+    /// but not a slide along it. Once the scans start, the accelerometer reads `acc_y_m_s2` along
+    /// the wall that the still start did not see (its bias shifting, a tilt the wall cannot show).
+    /// Returns how far it slid, the holds, and the refusals.
+    fn stand_before_a_wall(cfg: LioConfig, acc_y_m_s2: f64) -> (f64, u64, Vec<Refusal>) {
         use super::super::types::TimedPoint;
         let wall = |t_ns: u64| -> Vec<TimedPoint> {
             (0..40)
@@ -639,37 +660,59 @@ mod tests {
                 .map(|(i, k)| TimedPoint { x_m: 3.0, y_m: -2.0 + 0.1 * i as f32, z_m: -1.0 + 0.1 * k as f32, t_ns })
                 .collect()
         };
-        let run = |still_max_acc_m_s2: f64| {
-            let cfg = LioConfig { still_max_acc_m_s2, scan_min_points: 1000, ..LioConfig::default() };
-            let mut lio = Lio::new(cfg);
-            let mut out = Vec::new();
-            let mut t_ns = 0u64;
-            let mut imu_until = |lio: &mut Lio, end_ns: u64, out: &mut Vec<ScanOutput>| {
-                while t_ns <= end_ns {
-                    let acc_y = if t_ns > 2_000_000_000 { 0.08 } else { 0.0 };
-                    let acc_m_s2 = Vector3::new(0.0, acc_y, 9.81);
-                    lio.push_imu(ImuSample { t_ns, clock: Clock::Ptp, gyro_rad_s: Vector3::zeros(), acc_m_s2 }, out);
-                    t_ns += 5_000_000;
-                }
-            };
-            imu_until(&mut lio, 2_000_000_000, &mut out);
-            for k in 0..30u64 {
-                let start_ns = 2_000_000_000 + k * 100_000_000;
-                let end_ns = start_ns + 100_000_000;
-                lio.push_scan(
-                    LioScan { start_ns, end_ns, clock: Clock::Ptp, points: wall(start_ns + 50_000_000) },
-                    &mut out,
-                );
-                imu_until(&mut lio, end_ns, &mut out);
+        let mut lio = Lio::new(cfg);
+        let mut out = Vec::new();
+        let mut t_ns = 0u64;
+        let mut imu_until = |lio: &mut Lio, end_ns: u64, out: &mut Vec<ScanOutput>| {
+            while t_ns <= end_ns {
+                let acc_y = if t_ns > 2_000_000_000 { acc_y_m_s2 } else { 0.0 };
+                let acc_m_s2 = Vector3::new(0.0, acc_y, 9.81);
+                lio.push_imu(ImuSample { t_ns, clock: Clock::Ptp, gyro_rad_s: Vector3::zeros(), acc_m_s2 }, out);
+                t_ns += 5_000_000;
             }
-            let refused: Vec<_> = out.iter().filter_map(|o| o.refused).collect();
-            (lio.state().pos.y.abs(), lio.zero_velocity_updates(), refused)
         };
-        let (held_m, holds, refused) = run(0.1);
+        imu_until(&mut lio, 2_000_000_000, &mut out);
+        for k in 0..30u64 {
+            let start_ns = 2_000_000_000 + k * 100_000_000;
+            let end_ns = start_ns + 100_000_000;
+            lio.push_scan(
+                LioScan { start_ns, end_ns, clock: Clock::Ptp, points: wall(start_ns + 50_000_000) },
+                &mut out,
+            );
+            imu_until(&mut lio, end_ns, &mut out);
+        }
+        let refused: Vec<_> = out.iter().filter_map(|o| o.refused).collect();
+        (lio.state().pos.y.abs(), lio.zero_velocity_updates(), refused)
+    }
+
+    #[test]
+    fn a_still_device_whose_scans_match_holds_its_velocity_where_the_filter_sees_no_acceleration() {
+        let cfg =
+            |still_max_acc_m_s2: f64| LioConfig { still_max_acc_m_s2, scan_min_points: 1000, ..LioConfig::default() };
+        let (held_m, holds, refused) = stand_before_a_wall(cfg(0.1), 0.08);
         assert!(refused.is_empty(), "every scan matched: {refused:?}");
         assert!(held_m < 0.1 && holds >= 20, "held within {held_m:.3} m, {holds} holds");
-        let (slid_m, holds, _) = run(0.0);
+        let (slid_m, holds, _) = stand_before_a_wall(cfg(0.0), 0.08);
         assert!(slid_m > 0.25 && holds == 0, "without it the scans let it slide {slid_m:.3} m");
+    }
+
+    /// The same stand with a steady 0.13 m/s^2 along the wall, over the 0.1 limit: within what the
+    /// filter does not know of its own attitude and bias, so held once the limit is widened by it.
+    #[test]
+    fn a_steady_acceleration_the_filter_is_unsure_of_is_held_once_the_limit_is_widened() {
+        let cfg = |still_acc_sigmas: f64| LioConfig {
+            still_max_acc_m_s2: 0.1,
+            still_acc_sigmas,
+            still_change_weight: 3.0,
+            scan_min_points: 1000,
+            ..LioConfig::default()
+        };
+        // The first scan or two may hold: their window still reaches back into the quiet start.
+        let (slid_m, holds, _) = stand_before_a_wall(cfg(0.0), 0.13);
+        assert!(slid_m > 0.4 && holds <= 2, "not widened: slid {slid_m:.3} m, {holds} holds");
+        let (held_m, holds, refused) = stand_before_a_wall(cfg(1.0), 0.13);
+        assert!(refused.is_empty(), "every scan matched: {refused:?}");
+        assert!(held_m < 0.15 && holds >= 20, "held within {held_m:.3} m, {holds} holds");
     }
 
     #[test]

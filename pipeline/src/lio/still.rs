@@ -13,9 +13,10 @@
 
 use super::init::spread;
 use super::kalman::{update3, Rows3};
-use super::state::{Cov, State, VEL};
+use super::so3::skew;
+use super::state::{Cov, State, BA, DIM, GRAV, ROT, VEL};
 use super::types::ImuSample;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SMatrix, Vector3};
 use std::collections::VecDeque;
 
 /// The IMU's last `window_ns`, and whether it was still over all of it.
@@ -48,14 +49,17 @@ impl StillWindow {
     }
 
     /// Whether the world acceleration over the window stayed under `max_acc_m_s2` (RMS); never
-    /// with a limit of 0 or no samples.
-    pub fn quiet(&self, max_acc_m_s2: f64) -> bool {
+    /// with a limit of 0 or no samples. Its change over the window weighs `change_weight` times
+    /// (1: the plain RMS).
+    pub fn quiet(&self, max_acc_m_s2: f64, change_weight: f64) -> bool {
         if max_acc_m_s2 <= 0.0 || self.acc_world.is_empty() {
             return false;
         }
         let n = self.acc_world.len() as f64;
+        let mean = self.acc_world.iter().map(|(_, a)| a).sum::<Vector3<f64>>() / n;
         let mean_sq = self.acc_world.iter().map(|(_, a)| a.norm_squared()).sum::<f64>() / n;
-        mean_sq.sqrt() < max_acc_m_s2
+        let change = (mean_sq - mean.norm_squared()).max(0.0);
+        mean.norm_squared() + change_weight * change < max_acc_m_s2 * max_acc_m_s2
     }
 
     /// Whether the samples span the window up to `t_ns` and their spreads stay within the limits.
@@ -79,6 +83,18 @@ fn forget_before<T>(q: &mut VecDeque<T>, from_ns: u64, t_ns: impl Fn(&T) -> u64)
     }
 }
 
+/// The variance (trace of the covariance) of the world acceleration the filter derives from an
+/// accelerometer reading `acc_m_s2`: its attitude, accelerometer bias and gravity errors, through
+/// the velocity's rows of the propagation's Jacobian (`propagate::step`).
+pub fn acc_world_var(state: &State, cov: &Cov, acc_m_s2: &Vector3<f64>) -> f64 {
+    let r = *state.rot.matrix();
+    let mut j = SMatrix::<f64, 3, DIM>::zeros();
+    j.fixed_view_mut::<3, 3>(0, ROT).copy_from(&(-r * skew(&(acc_m_s2 - state.bias_acc))));
+    j.fixed_view_mut::<3, 3>(0, BA).copy_from(&-r);
+    j.fixed_view_mut::<3, 3>(0, GRAV).copy_from(&Matrix3::identity());
+    (j * cov * j.transpose()).trace()
+}
+
 /// One Kalman update of `state`/`cov` with a world velocity of zero, `sigma_m_s` on each axis.
 /// Returns false (nothing changed) when the innovation covariance cannot be inverted.
 pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) -> bool {
@@ -90,7 +106,11 @@ pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) ->
 
 #[cfg(test)]
 mod tests {
+    use super::super::init::InitResult;
+    use super::super::start::start_covariance;
     use super::*;
+    use nalgebra::Rotation3;
+    use std::f64::consts::PI;
 
     const MS: u64 = 1_000_000;
 
@@ -129,19 +149,62 @@ mod tests {
     #[test]
     fn quiet_only_while_the_world_acceleration_stays_small() {
         let mut w = StillWindow::new(500 * MS, 0.06, 0.2);
-        assert!(!w.quiet(0.1), "nothing seen");
+        assert!(!w.quiet(0.1, 1.0), "nothing seen");
         for k in 0..100u64 {
             let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
             w.push_acc_world(k * 5 * MS, Vector3::new(0.05 * sign, 0.0, 0.02));
         }
-        assert!(w.quiet(0.1));
-        assert!(!w.quiet(0.0), "a limit of 0 is off");
+        assert!(w.quiet(0.1, 1.0));
+        assert!(!w.quiet(0.0, 1.0), "a limit of 0 is off");
         // Setting off: 0.3 m/s^2 forward over the last 0.2 s of the window.
         for k in 100..140u64 {
             w.push_acc_world(k * 5 * MS, Vector3::new(0.3, 0.0, 0.0));
         }
-        assert!(!w.quiet(0.1));
-        assert!(w.quiet(0.3), "0.19 m/s^2 RMS over the window");
+        assert!(!w.quiet(0.1, 1.0));
+        assert!(w.quiet(0.3, 1.0), "0.19 m/s^2 RMS over the window");
+    }
+
+    #[test]
+    fn a_steady_acceleration_passes_where_a_ramp_of_the_same_rms_does_not() {
+        let (mut steady, mut ramp) = (StillWindow::new(500 * MS, 0.06, 0.2), StillWindow::new(500 * MS, 0.06, 0.2));
+        for k in 0..100u64 {
+            // A bias leaking into the world: 0.12 m/s^2, steady. Setting off: 0 to 0.21 m/s^2.
+            steady.push_acc_world(k * 5 * MS, Vector3::new(0.12, 0.0, 0.0));
+            ramp.push_acc_world(k * 5 * MS, Vector3::new(0.21 * k as f64 / 99.0, 0.0, 0.0));
+        }
+        // Both are about 0.12 m/s^2 RMS: the plain RMS cannot tell them apart.
+        assert!(steady.quiet(0.13, 1.0) && ramp.quiet(0.13, 1.0));
+        assert!(!steady.quiet(0.11, 1.0) && !ramp.quiet(0.11, 1.0));
+        // With the change weighing three times, the ramp is motion; the steady leak is not.
+        assert!(steady.quiet(0.13, 3.0));
+        assert!(!ramp.quiet(0.13, 3.0));
+    }
+
+    #[test]
+    fn a_bias_taken_for_gravity_is_sure_at_the_start_and_unsure_after_a_half_turn() {
+        let start = InitResult {
+            rot_world_imu: Rotation3::identity(),
+            gravity_m_s2: 9.81,
+            bias_gyro: Vector3::zeros(),
+            gyro_std_rad_s: 0.002,
+            end_ns: 0,
+        };
+        let mut cov = start_covariance(&start, 0.05);
+        let still = Vector3::new(0.0, 0.0, 9.81);
+        // An attitude 0.01 rad unsure about x and y (the start's) leaks g * 0.01 on each.
+        let mut attitude = Cov::zeros();
+        attitude.fixed_view_mut::<3, 3>(ROT, ROT).copy_from(&cov.fixed_view::<3, 3>(ROT, ROT));
+        let tilt_only = acc_world_var(&State::at_rest(), &attitude, &still);
+        assert!((tilt_only.sqrt() - 9.81 * 0.01 * 2f64.sqrt()).abs() < 1e-3, "{}", tilt_only.sqrt());
+        // With the attitude known exactly:
+        cov.fixed_view_mut::<3, 3>(ROT, ROT).fill(0.0);
+        let at_start = acc_world_var(&State::at_rest(), &cov, &still);
+        // The bias and the gravity's lean are one unknown: where the device looks as it did at the
+        // start, they cancel; half a turn later a horizontal bias counts twice.
+        let turned = State { rot: Rotation3::from_axis_angle(&Vector3::z_axis(), PI), ..State::at_rest() };
+        let after_turn = acc_world_var(&turned, &cov, &still);
+        assert!(at_start.sqrt() < 0.01, "{}", at_start.sqrt());
+        assert!((after_turn.sqrt() - (2.0 * 4.0 * 0.05f64.powi(2)).sqrt()).abs() < 0.01, "{}", after_turn.sqrt());
     }
 
     #[test]

@@ -110,6 +110,14 @@ pub const RIG_ACC_BIAS_SIGMA_M_S2: f64 = 0.05;
 /// still often while its scans hold its pose but barely its velocity (docs/lio.md, "Fine voxels
 /// where the view is small").
 pub const RIG_STILL_MAX_ACC_M_S2: f64 = 0.1;
+/// That limit is widened by this many sigmas of the world-acceleration error the rig's filter
+/// expects from its own attitude, bias and gravity (config/lio_rig.toml): after a turn, a bias
+/// its still start took for gravity reads as a steady acceleration (docs/lio.md, "A still helmet
+/// after a turn").
+pub const RIG_STILL_ACC_SIGMAS: f64 = 1.0;
+/// ... with the acceleration's change over the window weighing this many times its mean: a walk
+/// that sets off ramps up, the filter's own error is steady.
+pub const RIG_STILL_CHANGE_WEIGHT: f64 = 3.0;
 /// The rig's scans are reduced on finer voxels until they keep this many centroids
 /// (config/lio_rig.toml): a helmet often sees a wall within a metre and little else.
 pub const RIG_SCAN_MIN_POINTS: usize = 1000;
@@ -120,11 +128,14 @@ pub const RIG_FIT_RMS_REF_M: f64 = 0.02;
 impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
     /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
-    /// [`RIG_STILL_MAX_ACC_M_S2`], [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
+    /// [`RIG_STILL_MAX_ACC_M_S2`], [`RIG_STILL_ACC_SIGMAS`], [`RIG_STILL_CHANGE_WEIGHT`],
+    /// [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
             still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
+            still_acc_sigmas: RIG_STILL_ACC_SIGMAS,
+            still_change_weight: RIG_STILL_CHANGE_WEIGHT,
             scan_min_points: RIG_SCAN_MIN_POINTS,
             noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             update: UpdateConfig {
@@ -849,7 +860,8 @@ fn window(
 mod tests {
     use super::{
         start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_FIT_RMS_REF_M, RIG_GYRO_NOISE_RAD_S,
-        RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_MAX_ACC_M_S2,
+        RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_ACC_SIGMAS,
+        RIG_STILL_CHANGE_WEIGHT, RIG_STILL_MAX_ACC_M_S2,
     };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
@@ -867,6 +879,8 @@ mod tests {
         let mut generic = LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
             still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
+            still_acc_sigmas: RIG_STILL_ACC_SIGMAS,
+            still_change_weight: RIG_STILL_CHANGE_WEIGHT,
             scan_min_points: RIG_SCAN_MIN_POINTS,
             ..LioConfig::default()
         };
