@@ -118,6 +118,9 @@ pub const RIG_STILL_ACC_SIGMAS: f64 = 1.0;
 /// ... with the acceleration's change over the window weighing this many times its mean: a walk
 /// that sets off ramps up, the filter's own error is steady.
 pub const RIG_STILL_CHANGE_WEIGHT: f64 = 3.0;
+/// A rig held still keeps its velocity at zero within this (m/s; config/lio_rig.toml): a standing
+/// head sways by about 2 cm/s, not the generic 5.
+pub const RIG_STILL_SIGMA_M_S: f64 = 0.02;
 /// The rig's scans are reduced on finer voxels until they keep this many centroids
 /// (config/lio_rig.toml): a helmet often sees a wall within a metre and little else.
 pub const RIG_SCAN_MIN_POINTS: usize = 1000;
@@ -129,13 +132,14 @@ impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
     /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
     /// [`RIG_STILL_MAX_ACC_M_S2`], [`RIG_STILL_ACC_SIGMAS`], [`RIG_STILL_CHANGE_WEIGHT`],
-    /// [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
+    /// [`RIG_STILL_SIGMA_M_S`], [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
     pub fn rig_lio() -> LioConfig {
         LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
             still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
             still_acc_sigmas: RIG_STILL_ACC_SIGMAS,
             still_change_weight: RIG_STILL_CHANGE_WEIGHT,
+            still_sigma_m_s: RIG_STILL_SIGMA_M_S,
             scan_min_points: RIG_SCAN_MIN_POINTS,
             noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             update: UpdateConfig {
@@ -861,7 +865,7 @@ mod tests {
     use super::{
         start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_FIT_RMS_REF_M, RIG_GYRO_NOISE_RAD_S,
         RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_ACC_SIGMAS,
-        RIG_STILL_CHANGE_WEIGHT, RIG_STILL_MAX_ACC_M_S2,
+        RIG_STILL_CHANGE_WEIGHT, RIG_STILL_MAX_ACC_M_S2, RIG_STILL_SIGMA_M_S,
     };
     use crate::align::pose_xyz_yaw;
     use crate::ar::OrientedBox;
@@ -881,6 +885,7 @@ mod tests {
             still_max_acc_m_s2: RIG_STILL_MAX_ACC_M_S2,
             still_acc_sigmas: RIG_STILL_ACC_SIGMAS,
             still_change_weight: RIG_STILL_CHANGE_WEIGHT,
+            still_sigma_m_s: RIG_STILL_SIGMA_M_S,
             scan_min_points: RIG_SCAN_MIN_POINTS,
             ..LioConfig::default()
         };
