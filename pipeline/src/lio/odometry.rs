@@ -560,9 +560,9 @@ impl Lio {
     }
 
     /// The world acceleration a still device may show: the configured limit, widened by what the
-    /// filter does not know of its attitude, accelerometer bias and gravity. After a turn, a bias
-    /// the still start took for gravity shows as a steady acceleration of up to twice the bias
-    /// (development hall-18: 0.13 m/s^2 standing after a turn on the spot, docs/lio.md).
+    /// filter does not know of its attitude (mostly), accelerometer bias and gravity. After a turn,
+    /// a bias the still start took for gravity shows as a steady acceleration of up to twice the
+    /// bias (development hall-18: 0.13 m/s^2 standing after a turn on the spot, docs/lio.md).
     fn quiet_limit_m_s2(&self) -> f64 {
         let limit = self.cfg.still_max_acc_m_s2;
         let (k, Some(held)) = (self.cfg.still_acc_sigmas, self.held) else { return limit };
