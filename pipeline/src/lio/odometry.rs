@@ -445,8 +445,7 @@ impl Lio {
         // scan that matched holds it only where the filter also sees no acceleration: an IMU
         // cannot tell standing from gliding, and the first steps of a walk read as still.
         let unmatched = refused == Some(Refusal::TooFewMatches);
-        let quiet = self.still.quiet(self.quiet_limit_m_s2(), self.cfg.still_change_weight);
-        if wheel != WheelUse::Applied && (unmatched || quiet) {
+        if wheel != WheelUse::Applied && (unmatched || self.quiet()) {
             self.hold_if_still(scan.end_ns);
         }
         // A map too thin to match (the first scans, or a lost filter's) grows from the IMU's
@@ -559,17 +558,20 @@ impl Lio {
         }
     }
 
-    /// The world acceleration a still device may show: the configured limit, widened by what the
-    /// filter does not know of its attitude (mostly), accelerometer bias and gravity. After a turn,
-    /// a bias the still start took for gravity shows as a steady acceleration of up to twice the
-    /// bias (development hall-18: 0.13 m/s^2 standing after a turn on the spot, docs/lio.md).
-    fn quiet_limit_m_s2(&self) -> f64 {
-        let limit = self.cfg.still_max_acc_m_s2;
-        let (k, Some(held)) = (self.cfg.still_acc_sigmas, self.held) else { return limit };
-        if limit <= 0.0 || k <= 0.0 {
-            return limit;
-        }
-        (limit * limit + k * k * acc_world_var(&self.state, &self.cov, &held.acc_m_s2)).sqrt()
+    /// Whether the world acceleration over the still window stayed within what a still device may
+    /// show: the configured limit, widened by what the filter does not know of its attitude
+    /// (mostly), accelerometer bias and gravity. After a turn, a bias the still start took for
+    /// gravity shows as a steady acceleration of up to twice the bias (development hall-18:
+    /// 0.13 m/s^2 standing after a turn on the spot, docs/lio.md).
+    fn quiet(&self) -> bool {
+        let (limit, k) = (self.cfg.still_max_acc_m_s2, self.cfg.still_acc_sigmas);
+        let widened = match self.held {
+            Some(held) if limit > 0.0 && k > 0.0 => {
+                (limit * limit + k * k * acc_world_var(&self.state, &self.cov, &held.acc_m_s2)).sqrt()
+            }
+            _ => limit,
+        };
+        self.still.quiet(widened, self.cfg.still_change_weight)
     }
 
     /// A scan that could not be matched: where the IMU has been still, the velocity is held at

@@ -1,9 +1,9 @@
 //! IMU forward propagation of the state and its error covariance (discrete, first order).
 
 use super::so3;
-use super::state::{Cov, State, BA, BG, GRAV, POS, ROT, VEL};
+use super::state::{Cov, State, BA, BG, DIM, GRAV, POS, ROT, VEL};
 use super::types::ImuSample;
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
 
 /// Continuous-time noise densities (per sqrt(s)); defaults close to FAST-LIO's for the Avia.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +41,18 @@ impl Knot {
     }
 }
 
+/// How the world acceleration `R (f - b_a) + g` the filter derives from a body acceleration
+/// `acc_body` (`f - b_a`) moves with its error state: the attitude, the accelerometer bias and the
+/// gravity (the velocity's rows of the propagation's Jacobian, per second).
+pub fn acc_world_jacobian(rot: &Rotation3<f64>, acc_body: &Vector3<f64>) -> SMatrix<f64, 3, DIM> {
+    let r = rot.matrix();
+    let mut j = SMatrix::<f64, 3, DIM>::zeros();
+    j.fixed_view_mut::<3, 3>(0, ROT).copy_from(&(-r * so3::skew(acc_body)));
+    j.fixed_view_mut::<3, 3>(0, BA).copy_from(&-r);
+    j.fixed_view_mut::<3, 3>(0, GRAV).copy_from(&Matrix3::identity());
+    j
+}
+
 /// Moves `state` and `cov` forward by `dt_s` with the measurement `imu` held over that interval.
 /// Returns the knot at the start of the interval.
 pub fn step(state: &mut State, cov: &mut Cov, imu: &ImuSample, t_ns: u64, dt_s: f64, noise: &ImuNoise) -> Knot {
@@ -51,15 +63,13 @@ pub fn step(state: &mut State, cov: &mut Cov, imu: &ImuSample, t_ns: u64, dt_s: 
     if dt_s <= 0.0 {
         return knot;
     }
-    let r = *state.rot.matrix();
     let eye = Matrix3::identity();
     let mut f = Cov::identity();
     f.fixed_view_mut::<3, 3>(ROT, ROT).copy_from(so3::exp(&(-omega * dt_s)).matrix());
     f.fixed_view_mut::<3, 3>(ROT, BG).copy_from(&(-eye * dt_s));
     f.fixed_view_mut::<3, 3>(POS, VEL).copy_from(&(eye * dt_s));
-    f.fixed_view_mut::<3, 3>(VEL, ROT).copy_from(&(-r * so3::skew(&acc_body) * dt_s));
-    f.fixed_view_mut::<3, 3>(VEL, BA).copy_from(&(-r * dt_s));
-    f.fixed_view_mut::<3, 3>(VEL, GRAV).copy_from(&(eye * dt_s));
+    let mut vel_rows = f.fixed_view_mut::<3, DIM>(VEL, 0);
+    vel_rows += acc_world_jacobian(&state.rot, &acc_body) * dt_s;
     let mut q = Cov::zeros();
     let diag = |q: &mut Cov, at: usize, v: f64| {
         for i in at..at + 3 {

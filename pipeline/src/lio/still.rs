@@ -13,10 +13,10 @@
 
 use super::init::spread;
 use super::kalman::{update3, Rows3};
-use super::so3::skew;
-use super::state::{Cov, State, BA, DIM, GRAV, ROT, VEL};
+use super::propagate::acc_world_jacobian;
+use super::state::{Cov, State, VEL};
 use super::types::ImuSample;
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use std::collections::VecDeque;
 
 /// The IMU's last `window_ns`, and whether it was still over all of it.
@@ -85,13 +85,9 @@ fn forget_before<T>(q: &mut VecDeque<T>, from_ns: u64, t_ns: impl Fn(&T) -> u64)
 
 /// The variance (trace of the covariance) of the world acceleration the filter derives from an
 /// accelerometer reading `acc_m_s2`: its attitude, accelerometer bias and gravity errors, through
-/// the velocity's rows of the propagation's Jacobian (`propagate::step`).
+/// the propagation's own Jacobian ([`acc_world_jacobian`]).
 pub fn acc_world_var(state: &State, cov: &Cov, acc_m_s2: &Vector3<f64>) -> f64 {
-    let r = *state.rot.matrix();
-    let mut j = SMatrix::<f64, 3, DIM>::zeros();
-    j.fixed_view_mut::<3, 3>(0, ROT).copy_from(&(-r * skew(&(acc_m_s2 - state.bias_acc))));
-    j.fixed_view_mut::<3, 3>(0, BA).copy_from(&-r);
-    j.fixed_view_mut::<3, 3>(0, GRAV).copy_from(&Matrix3::identity());
+    let j = acc_world_jacobian(&state.rot, &(acc_m_s2 - state.bias_acc));
     (j * cov * j.transpose()).trace()
 }
 
@@ -108,6 +104,7 @@ pub fn zero_velocity_update(state: &mut State, cov: &mut Cov, sigma_m_s: f64) ->
 mod tests {
     use super::super::init::InitResult;
     use super::super::start::start_covariance;
+    use super::super::state::ROT;
     use super::*;
     use nalgebra::Rotation3;
     use std::f64::consts::PI;
