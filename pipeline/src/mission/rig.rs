@@ -92,12 +92,6 @@ pub struct RigCoreConfig {
 /// and more sharply than a wheeled base (the robot's 0.001), so the margin stays wider: 0.01,
 /// measured on development buildings (docs/lio.md, "The rig's gyro noise").
 pub const RIG_GYRO_NOISE_RAD_S: f64 = 0.01;
-/// The rig's accelerometer noise density for its LIO (m/s^2 per sqrt(Hz); config/lio_rig.toml):
-/// half the generic 0.1 (still 30 times the BMI088's 0.0017, room for a helmet's vibration and
-/// the first-order propagation). With 0.1 the filter doubted the IMU's velocity so much that a
-/// scan seeing little moved it; lower still, it trusts the IMU through walks the scans cannot
-/// see and the worst buildings grow (docs/lio.md, "The rig's accelerometer noise").
-pub const RIG_ACC_NOISE_M_S2: f64 = 0.05;
 /// The variance the rig's LIO gives one point-to-plane residual (m^2; config/lio_rig.toml). As
 /// for the robot ([`super::robot::ROBOT_RESIDUAL_VAR_M2`]) one scan's residuals are not
 /// independent, and a helmet's scans also carry its quick turns' de-skew errors: 0.03 (17 cm).
@@ -136,7 +130,7 @@ pub const RIG_FIT_RMS_REF_M: f64 = 0.02;
 
 impl RigCoreConfig {
     /// The rig's LIO settings: the defaults with [`RIG_GYRO_NOISE_RAD_S`],
-    /// [`RIG_ACC_NOISE_M_S2`], [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
+    /// [`RIG_RESIDUAL_VAR_M2`], [`RIG_MIN_DIRECTION_INFO`], [`RIG_ACC_BIAS_SIGMA_M_S2`],
     /// [`RIG_STILL_MAX_ACC_M_S2`], [`RIG_STILL_ACC_SIGMAS`], [`RIG_STILL_CHANGE_WEIGHT`],
     /// [`RIG_STILL_SIGMA_M_S`], [`RIG_SCAN_MIN_POINTS`] and [`RIG_FIT_RMS_REF_M`].
     pub fn rig_lio() -> LioConfig {
@@ -147,7 +141,7 @@ impl RigCoreConfig {
             still_change_weight: RIG_STILL_CHANGE_WEIGHT,
             still_sigma_m_s: RIG_STILL_SIGMA_M_S,
             scan_min_points: RIG_SCAN_MIN_POINTS,
-            noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, acc_m_s2: RIG_ACC_NOISE_M_S2, ..ImuNoise::default() },
+            noise: ImuNoise { gyro_rad_s: RIG_GYRO_NOISE_RAD_S, ..ImuNoise::default() },
             update: UpdateConfig {
                 residual_var_m2: RIG_RESIDUAL_VAR_M2,
                 min_direction_info: RIG_MIN_DIRECTION_INFO,
@@ -869,8 +863,8 @@ fn window(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::{
-        start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_ACC_NOISE_M_S2, RIG_FIT_RMS_REF_M,
-        RIG_GYRO_NOISE_RAD_S, RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_ACC_SIGMAS,
+        start_offset_m, RigCore, RigCoreConfig, RIG_ACC_BIAS_SIGMA_M_S2, RIG_FIT_RMS_REF_M, RIG_GYRO_NOISE_RAD_S,
+        RIG_MIN_DIRECTION_INFO, RIG_RESIDUAL_VAR_M2, RIG_SCAN_MIN_POINTS, RIG_STILL_ACC_SIGMAS,
         RIG_STILL_CHANGE_WEIGHT, RIG_STILL_MAX_ACC_M_S2, RIG_STILL_SIGMA_M_S,
     };
     use crate::align::pose_xyz_yaw;
@@ -883,8 +877,8 @@ mod tests {
         let file = LioFile::from_toml(include_str!("../../../config/lio_rig.toml")).unwrap();
         assert_eq!(file.to_config().unwrap(), RigCoreConfig::rig_lio());
         assert_eq!(RigCoreConfig::default().lio, RigCoreConfig::rig_lio());
-        // Everything but the gyro's and accelerometer's noise, the update's residual variance and
-        // weak-direction threshold, the accelerometer bias tied to gravity, the still hold on matched scans and
+        // Everything but the gyro's noise, the update's residual variance and weak-direction
+        // threshold, the accelerometer bias tied to gravity, the still hold on matched scans and
         // the scans' finer voxels is the LIO's generic default.
         let mut generic = LioConfig {
             acc_bias_sigma_m_s2: RIG_ACC_BIAS_SIGMA_M_S2,
@@ -896,7 +890,6 @@ mod tests {
             ..LioConfig::default()
         };
         generic.noise.gyro_rad_s = RIG_GYRO_NOISE_RAD_S;
-        generic.noise.acc_m_s2 = RIG_ACC_NOISE_M_S2;
         generic.update.residual_var_m2 = RIG_RESIDUAL_VAR_M2;
         generic.update.min_direction_info = RIG_MIN_DIRECTION_INFO;
         generic.update.fit_rms_ref_m = RIG_FIT_RMS_REF_M;
