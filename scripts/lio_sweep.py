@@ -2,7 +2,7 @@
 """The robot's or the rig's LIO on many generated buildings, for one or more configs, in minutes.
 
     .venv/bin/python scripts/lio_sweep.py --seeds 0..83 --dev --config config/lio_robot.toml \
-        [--config other.toml ...] [--device robot|rig] [--work /tmp/lio_sweep]
+        [--config other.toml ...] [--side robot|rig] [--work /tmp/lio_sweep]
         [--starc target/release/starc] [--jobs 2]
 
 Each building is generated and simulated once and kept under --work: `starc gen --seed S`,
@@ -16,13 +16,14 @@ config/lio_robot.toml and the wheels is the mission's robot LIO, so a config's e
 robot's odometry is measured without running the missions (84 buildings: about 2 minutes a
 config on 2 cores, once the buildings exist).
 
-`--device rig` runs the responder's Avia (192.168.2.102, its own IMU, no wheels) instead, scored
-against gt_fpv.tum as report.json's `rig_lio_error` (the same tie at the first pose); its goal is
-5 cm, so the count under 5 cm is printed as well. Both devices' records are cut from one
-simulation, so a building prepared for one serves the other.
+`--side rig` runs the responder's Avia (192.168.2.102, its own IMU, no wheels) instead, scored
+against gt_fpv.tum as report.json's `rig_lio_error` (the same tie at the first pose); the sides
+are scripts/odometry_peers.py's. Both Avias' records are cut from one simulation, so a building
+prepared for one side serves the other.
 
 Prints per config: median RMSE, how many buildings under 3 cm, under 5 cm and over 10 cm (the
-odometry issue's goals: 3 cm for the robot, 5 cm for the rig), p90, worst, mean; writes `<work>/sweep_<config stem>.json` (seed: RMSE).
+odometry issue's goals: 3 cm for the robot, 5 cm for the rig), p90, worst, mean; writes
+`<work>/sweep_<side>_<config stem>.json` (seed: RMSE).
 Seeds 1000 and up are the test set (report only); seeds under 1000 need `--dev`.
 """
 
@@ -39,12 +40,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-from odometry_peers import ROBOT_IP, base_toml, parse_seeds  # noqa: E402
-
-RIG_IP = "192.168.2.102"
-# Each device: its Avia's address, its cut pcap, its truth, and whether the base's wheels join.
-DEVICES = {"robot": (ROBOT_IP, "robot.pcap", "gt_robot.tum", True),
-           "rig": (RIG_IP, "rig.pcap", "gt_fpv.tum", False)}
+from odometry_peers import SIDES, base_toml, parse_seeds  # noqa: E402
 
 
 def split_pcap(src, dsts):
@@ -71,16 +67,16 @@ def split_pcap(src, dsts):
 def prepare(starc, work, seed):
     """Generates and simulates one building once; returns its directory."""
     d = work / str(seed)
-    if (d / "robot.pcap").exists() and (d / "rig.pcap").exists():
+    if all((d / f"{side}.pcap").exists() for side in SIDES):
         return d
     (d / "sim").mkdir(parents=True, exist_ok=True)
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "check": True}
     subprocess.run([starc, "gen", "--seed", str(seed), "--out", d / "scenario.toml"], **quiet)
     subprocess.run([starc, "sim", d / "scenario.toml", "--sensors-only", "--no-camera", "--seed", str(seed),
                     "--out", d / "sim"], **quiet)
-    split_pcap(d / "sim/avia.pcap", {ip: d / f"{name}.part" for ip, name, _, _ in DEVICES.values()})
-    for _, name, _, _ in DEVICES.values():
-        (d / f"{name}.part").rename(d / name)
+    split_pcap(d / "sim/avia.pcap", {s["ip"]: d / f"{side}.pcap.part" for side, s in SIDES.items()})
+    for side in SIDES:
+        (d / f"{side}.pcap.part").rename(d / f"{side}.pcap")
     for bulky in ["avia.pcap", "labels_robot.bin", "labels_fpv.bin"]:
         (d / "sim" / bulky).unlink(missing_ok=True)
     (d / "base.toml").write_text(base_toml(d / "scenario.toml")[0])
@@ -110,21 +106,22 @@ def rmse_from_first_pose(est_tum, gt_tum):
     return float(np.sqrt(np.mean(np.square(err))))
 
 
-def run_lio(starc, d, config, device):
-    ip, pcap, gt, wheels = DEVICES[device]
-    out = d / f"lio_{device}_{Path(config).stem}"
-    cmd = [starc, "lio", d / pcap, "--device", ip, "--config", config, "--out", out]
-    if wheels:
+def run_lio(starc, d, config, side):
+    s = SIDES[side]
+    out = d / f"lio_{side}_{Path(config).stem}"
+    cmd = [starc, "lio", d / f"{side}.pcap", "--device", s["ip"], "--config", config, "--out", out]
+    if s["wheels"]:
         cmd += ["--wheels", d / "sim/robot_can.log", "--base-config", d / "base.toml"]
     subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
-    return rmse_from_first_pose(out / f"{ip}.tum", d / "sim" / gt)
+    return rmse_from_first_pose(out / f"{s['ip']}.tum", d / "sim" / s["gt"])
 
 
 def summary(name, rmse):
     v = sorted(rmse.values())
     n = len(v)
     return (f"{name}: {n} buildings, median {statistics.median(v) * 100:.2f} cm, under 3 cm "
-            f"{sum(x < 0.03 for x in v)}, under 5 cm {sum(x < 0.05 for x in v)}, over 10 cm {sum(x > 0.1 for x in v)}, p90 {v[int(0.9 * n)] * 100:.1f} cm, "
+            f"{sum(x < 0.03 for x in v)}, under 5 cm {sum(x < 0.05 for x in v)}, over 10 cm {sum(x > 0.1 for x in v)}, "
+            f"p90 {v[int(0.9 * n)] * 100:.1f} cm, "
             f"worst {v[-1] * 100:.1f} cm, mean {statistics.mean(v) * 100:.2f} cm")
 
 
@@ -133,7 +130,7 @@ def main():
     ap.add_argument("--seeds", required=True)
     ap.add_argument("--dev", action="store_true", help="allow development seeds (under 1000)")
     ap.add_argument("--config", action="append", required=True, help="a LIO config (repeat for more)")
-    ap.add_argument("--device", choices=sorted(DEVICES), default="robot", help="whose LIO (default: robot)")
+    ap.add_argument("--side", choices=sorted(SIDES), default="robot", help="whose LIO (default: robot)")
     ap.add_argument("--work", type=Path, default=Path("/tmp/lio_sweep"))
     ap.add_argument("--starc", default=str(ROOT / "target/release/starc"))
     ap.add_argument("--jobs", type=int, default=2)
@@ -147,8 +144,8 @@ def main():
     with ThreadPoolExecutor(a.jobs) as ex:
         dirs = dict(zip(seeds, ex.map(lambda s: prepare(a.starc, a.work, s), seeds)))
         for config in a.config:
-            rmse = dict(zip(seeds, ex.map(lambda s: run_lio(a.starc, dirs[s], config, a.device), seeds)))
-            (a.work / f"sweep_{a.device}_{Path(config).stem}.json").write_text(json.dumps(rmse, indent=1))
+            rmse = dict(zip(seeds, ex.map(lambda s: run_lio(a.starc, dirs[s], config, a.side), seeds)))
+            (a.work / f"sweep_{a.side}_{Path(config).stem}.json").write_text(json.dumps(rmse, indent=1))
             print(summary(Path(config).stem, rmse), flush=True)
 
 
