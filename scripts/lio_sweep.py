@@ -64,14 +64,21 @@ def split_pcap(src, dsts):
             o.close()
 
 
-def prepare(starc, work, seed):
-    """Generates and simulates one building once; returns its directory."""
+def prepare(starc, work, seed, legs=None):
+    """Generates and simulates one building once; returns its directory. `legs`: the responder's
+    leg profile written into the scenario (`[responder] legs`), or the generator's."""
     d = work / str(seed)
     if all((d / f"{side}.pcap").exists() for side in SIDES):
         return d
     (d / "sim").mkdir(parents=True, exist_ok=True)
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "check": True}
     subprocess.run([starc, "gen", "--seed", str(seed), "--out", d / "scenario.toml"], **quiet)
+    if legs:
+        scenario = d / "scenario.toml"
+        text = scenario.read_text()
+        if "\n[responder]\n" not in text:
+            sys.exit(f"{scenario}: no [responder] table to set legs in")
+        scenario.write_text(text.replace("\n[responder]\n", f'\n[responder]\nlegs = "{legs}"\n', 1))
     subprocess.run([starc, "sim", d / "scenario.toml", "--sensors-only", "--no-camera", "--seed", str(seed),
                     "--out", d / "sim"], **quiet)
     split_pcap(d / "sim/avia.pcap", {s["ip"]: d / f"{side}.pcap.part" for side, s in SIDES.items()})
@@ -134,6 +141,9 @@ def main():
     ap.add_argument("--work", type=Path, default=Path("/tmp/lio_sweep"))
     ap.add_argument("--starc", default=str(ROOT / "target/release/starc"))
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--responder-legs", choices=["min_jerk", "walk"],
+                    help="how the responder's legs speed up (scenario [responder] legs; default: the "
+                         "generator's); use a --work of its own, buildings are prepared once")
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
     if any(s < 1000 for s in seeds) and not a.dev:
@@ -142,7 +152,7 @@ def main():
         sys.exit("one run takes one set: development (under 1000) or test (1000 and up)")
     a.work.mkdir(parents=True, exist_ok=True)
     with ThreadPoolExecutor(a.jobs) as ex:
-        dirs = dict(zip(seeds, ex.map(lambda s: prepare(a.starc, a.work, s), seeds)))
+        dirs = dict(zip(seeds, ex.map(lambda s: prepare(a.starc, a.work, s, a.responder_legs), seeds)))
         for config in a.config:
             rmse = dict(zip(seeds, ex.map(lambda s: run_lio(a.starc, dirs[s], config, a.side), seeds)))
             (a.work / f"sweep_{a.side}_{Path(config).stem}.json").write_text(json.dumps(rmse, indent=1))

@@ -35,6 +35,32 @@ fn min_jerk_rate(tau: f64) -> f64 {
     30.0 * t * t * (1.0 - t) * (1.0 - t)
 }
 
+/// Velocity along a walking ramp (0..1 of the cruising speed) at normalised time `tau` (0..1):
+/// the minimum-jerk profile's position, so that the acceleration starts and ends at zero.
+fn ramp_speed(tau: f64) -> f64 {
+    min_jerk(tau)
+}
+
+/// Distance along a walking ramp, in units of cruising speed times ramp time (0..0.5).
+fn ramp_distance(tau: f64) -> f64 {
+    let t = tau.clamp(0.0, 1.0);
+    t * t * t * t * (2.5 - 3.0 * t + t * t)
+}
+
+/// How a leg goes from rest to rest.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LegProfile {
+    /// One minimum-jerk profile over the whole leg: the speed peaks at its middle only, so a
+    /// long leg starts very gently (an 8 m leg at 1.2 m/s reaches half that after 2.9 s).
+    #[default]
+    MinJerk,
+    /// As people walk: up to the speed within a smooth ramp at the acceleration limit (1.6 s to
+    /// 1 m/s at 1.2 m/s^2), on at that speed, and down the same way; turns on the spot stay
+    /// minimum-jerk.
+    Walk,
+}
+
 /// One leg of a route: rest at `from` until `t0`, move to `to` by `t1`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Leg {
@@ -44,6 +70,42 @@ struct Leg {
     to: [f64; 3],
     /// Distance walked before this leg.
     s0: f64,
+    /// A walking leg's cruising speed and the length of each of its two ramps; none: minimum
+    /// jerk over the whole leg.
+    walk: Option<(f64, f64)>,
+}
+
+impl Leg {
+    /// The share of the leg done (0..1) and the speed over the ground, `t` into it.
+    fn progress(&self, t: f64, d: f64) -> (f64, f64) {
+        let dur = self.t1 - self.t0;
+        match self.walk {
+            Some((cruise, ramp)) if d > 0.0 => {
+                let up = cruise * ramp * ramp_distance(t / ramp);
+                let (s, v) = if t < ramp {
+                    (up, cruise * ramp_speed(t / ramp))
+                } else if t <= dur - ramp {
+                    (cruise * ramp * 0.5 + cruise * (t - ramp), cruise)
+                } else {
+                    let left = dur - t;
+                    (d - cruise * ramp * ramp_distance(left / ramp), cruise * ramp_speed(left / ramp))
+                };
+                ((s / d).clamp(0.0, 1.0), v)
+            }
+            _ => {
+                let tau = t / dur;
+                (min_jerk(tau), d * min_jerk_rate(tau) / dur)
+            }
+        }
+    }
+}
+
+/// A walking leg of `d` m: its cruising speed, ramp time and duration (the ramps' peak
+/// acceleration is 1.875 times cruise / ramp, as the minimum-jerk profile's).
+fn walk_leg(d: f64, max_speed: f64, max_accel: f64) -> (f64, f64, f64) {
+    let cruise = max_speed.min((d * max_accel / MJ_PEAK_SPEED).sqrt());
+    let ramp = MJ_PEAK_SPEED * cruise / max_accel;
+    (cruise, ramp, d / cruise + ramp)
 }
 
 /// Where something is on its route at one instant.
@@ -76,6 +138,13 @@ impl Route {
         max_yaw_rate: f64,
         pause_s: f64,
     ) -> Self {
+        Self::with_profile(waypoints, t_start, [max_speed, max_accel, max_yaw_rate], pause_s, LegProfile::MinJerk)
+    }
+
+    /// The same with legs that move (not turns on the spot) shaped by `profile`; `limits` are the
+    /// speed, acceleration and yaw rate.
+    fn with_profile(waypoints: &[[f64; 3]], t_start: f64, limits: [f64; 3], pause_s: f64, profile: LegProfile) -> Self {
+        let [max_speed, max_accel, max_yaw_rate] = limits;
         let start = waypoints.first().copied().unwrap_or([0.0; 3]);
         let mut legs = Vec::new();
         let mut t = t_start;
@@ -85,11 +154,20 @@ impl Route {
             let to = [wp[0], wp[1], from[2] + wrap_pi(wp[2] - from[2])];
             let d = (to[0] - from[0]).hypot(to[1] - from[1]);
             let dyaw = (to[2] - from[2]).abs();
-            let duration = (MJ_PEAK_SPEED * d / max_speed)
+            let min_jerk_s = (MJ_PEAK_SPEED * d / max_speed)
                 .max((MJ_PEAK_ACCEL * d / max_accel).sqrt())
                 .max(MJ_PEAK_SPEED * dyaw / max_yaw_rate)
                 .max(1e-3);
-            legs.push(Leg { t0: t, t1: t + duration, from, to, s0: s });
+            // A walk that also turns more than its ramps allow stays minimum-jerk (the responder's
+            // walks never turn: it turns on the spot first).
+            let walk = (profile == LegProfile::Walk && d > 1e-6)
+                .then(|| walk_leg(d, max_speed, max_accel))
+                .filter(|&(_, _, walk_s)| walk_s >= MJ_PEAK_SPEED * dyaw / max_yaw_rate);
+            let (duration, walk) = match walk {
+                Some((cruise, ramp, walk_s)) => (walk_s, Some((cruise, ramp))),
+                None => (min_jerk_s, None),
+            };
+            legs.push(Leg { t0: t, t1: t + duration, from, to, s0: s, walk });
             t += duration + pause_s;
             s += d;
             from = to;
@@ -113,17 +191,9 @@ impl Route {
         if t >= leg.t1 {
             return rest(leg.to, leg.s0 + d);
         }
-        let dur = leg.t1 - leg.t0;
-        let tau = (t - leg.t0) / dur;
-        let f = min_jerk(tau);
+        let (f, speed_m_s) = leg.progress(t - leg.t0, d);
         let lerp = |k: usize| leg.from[k] + (leg.to[k] - leg.from[k]) * f;
-        RouteState {
-            x: lerp(0),
-            y: lerp(1),
-            yaw_rad: lerp(2),
-            speed_m_s: d * min_jerk_rate(tau) / dur,
-            distance_m: leg.s0 + d * f,
-        }
+        RouteState { x: lerp(0), y: lerp(1), yaw_rad: lerp(2), speed_m_s, distance_m: leg.s0 + d * f }
     }
 }
 
@@ -246,13 +316,12 @@ impl ResponderMotion {
             points.push([a[0], a[1], heading]);
             points.push([b[0], b[1], heading]);
         }
-        let route = Route::new(
+        let route = Route::with_profile(
             &points,
             r.start_s + r.static_s,
-            r.speed_m_s,
-            WALK_ACCEL_M_S2,
-            PERSON_TURN_DEG_S.to_radians(),
+            [r.speed_m_s, WALK_ACCEL_M_S2, PERSON_TURN_DEG_S.to_radians()],
             r.pause_s,
+            r.legs,
         );
         let (height, gait, drift) = match r.mount {
             Mount::Helmet => (1.80, [0.025, 3.0f64.to_radians(), 1.5f64.to_radians(), 1.0f64.to_radians()], 0.0),
@@ -364,6 +433,47 @@ mod tests {
         assert!((end.x - 4.0).abs() < 1e-9 && (end.y - 3.0).abs() < 1e-9 && (end.distance_m - 7.0).abs() < 1e-9);
         let before = route.at(1.99);
         assert_eq!((before.x, before.speed_m_s), (0.0, 0.0));
+    }
+
+    /// The route's speed and acceleration over `[t0, t1]`, by differences of its positions
+    /// every `dt` s (checks that the reported speed is the position's rate, and the limits).
+    fn speed_and_accel_peaks(route: &Route, t0: f64, t1: f64) -> (f64, f64, f64) {
+        let dt = 0.001;
+        let (mut v_max, mut a_max, mut rate_err): (f64, f64, f64) = (0.0, 0.0, 0.0);
+        let mut t = t0;
+        while t < t1 {
+            let (a, b) = (route.at(t), route.at(t + dt));
+            let rate = (b.x - a.x).hypot(b.y - a.y) / dt;
+            rate_err = rate_err.max((rate - 0.5 * (a.speed_m_s + b.speed_m_s)).abs());
+            v_max = v_max.max(a.speed_m_s);
+            a_max = a_max.max((b.speed_m_s - a.speed_m_s).abs() / dt);
+            t += dt;
+        }
+        (v_max, a_max, rate_err)
+    }
+
+    #[test]
+    fn a_walking_leg_is_at_its_speed_within_a_ramp_and_arrives() {
+        let waypoints = [[0.0, 0.0, 0.0], [8.0, 0.0, 0.0]];
+        let walk = Route::with_profile(&waypoints, 1.0, [1.2, 1.2, 2.0], 0.5, LegProfile::Walk);
+        let min_jerk = Route::new(&waypoints, 1.0, 1.2, 1.2, 2.0, 0.5);
+        // Ramps of 1.875 s, 8 m at 1.2 m/s: 6.67 s plus one ramp.
+        assert!((walk.end_s() - (1.0 + 8.0 / 1.2 + 1.875)).abs() < 1e-9, "{}", walk.end_s());
+        let (v_max, a_max, rate_err) = speed_and_accel_peaks(&walk, 0.0, walk.end_s() + 1.0);
+        assert!((v_max - 1.2).abs() < 1e-6, "{v_max}");
+        assert!(a_max <= 1.2 + 1e-3 && a_max > 1.1, "{a_max}");
+        assert!(rate_err < 1e-3, "the speed is the position's rate: {rate_err}");
+        // A second in, the walker is at half its speed; the minimum-jerk leg at a tenth.
+        assert!((walk.at(2.0).speed_m_s - 0.6).abs() < 0.15, "{:?}", walk.at(2.0));
+        assert!(min_jerk.at(2.0).speed_m_s < 0.15, "{:?}", min_jerk.at(2.0));
+        let end = walk.at(walk.end_s() + 1.0);
+        assert!((end.x - 8.0).abs() < 1e-9 && end.speed_m_s == 0.0 && (end.distance_m - 8.0).abs() < 1e-9);
+        // A leg too short to reach the speed turns round at a lower one, still smoothly.
+        let short =
+            Route::with_profile(&[[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]], 0.0, [1.2, 1.2, 2.0], 0.0, LegProfile::Walk);
+        let (v_short, a_short, err_short) = speed_and_accel_peaks(&short, 0.0, short.end_s() + 0.5);
+        assert!(v_short < 1.2 && a_short <= 1.2 + 1e-3 && err_short < 1e-3, "{v_short} {a_short} {err_short}");
+        assert!((short.at(10.0).x - 0.5).abs() < 1e-9);
     }
 
     #[test]

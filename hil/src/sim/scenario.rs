@@ -329,6 +329,7 @@ impl Responder {
             pause_s: default_pause(),
             rig_height_m: None,
             rig_pitch_deg: 0.0,
+            legs: crate::sim::motion::LegProfile::default(),
         }
     }
 }
@@ -394,6 +395,10 @@ pub struct Responder {
     /// Pitch of the rig (positive looks down).
     #[serde(default)]
     pub rig_pitch_deg: f64,
+    /// How each leg of the walk speeds up and slows down (`min_jerk`, the default: over the
+    /// whole leg; `walk`: within about a second and a half, as people walk).
+    #[serde(default)]
+    pub legs: crate::sim::motion::LegProfile,
 }
 
 fn default_responder_speed() -> f64 {
@@ -782,6 +787,17 @@ mod tests {
         assert!(error_of(&walker).contains("only a standing person"), "{}", error_of(&walker));
         let build = format!("{MINIMAL}[[people]]\nname = \"a\"\nat = [1, 1]\nbuild = 1.6\n");
         assert!(error_of(&build).contains("line 6") && error_of(&build).contains("build"), "{}", error_of(&build));
+    }
+
+    #[test]
+    fn the_responders_legs_are_minimum_jerk_unless_asked_to_walk() {
+        use crate::sim::motion::LegProfile;
+        let legs = |text: &str| Scenario::parse(text, "t.toml").map(|s| s.responder.get_ref().legs);
+        assert_eq!(legs(MINIMAL).unwrap(), LegProfile::MinJerk);
+        let walk = MINIMAL.replace("[responder]\n", "[responder]\nlegs = \"walk\"\n");
+        assert_eq!(legs(&walk).unwrap(), LegProfile::Walk);
+        let run = MINIMAL.replace("[responder]\n", "[responder]\nlegs = \"run\"\n");
+        assert!(error_of(&run).contains("line 5") && error_of(&run).contains("run"), "{}", error_of(&run));
     }
 
     #[test]
