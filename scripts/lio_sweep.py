@@ -29,6 +29,7 @@ Seeds 1000 and up are the test set (report only); seeds under 1000 need `--dev`.
 
 import argparse
 import json
+import re
 import statistics
 import struct
 import subprocess
@@ -68,25 +69,29 @@ def prepare(starc, work, seed, legs=None):
     """Generates and simulates one building once; returns its directory. `legs`: the responder's
     leg profile written into the scenario (`[responder] legs`), or the generator's."""
     d = work / str(seed)
+    scenario = d / "scenario.toml"
     if all((d / f"{side}.pcap").exists() for side in SIDES):
+        prepared = re.search(r'^legs = "(\w+)"$', scenario.read_text(), re.M)
+        if (prepared and prepared.group(1)) != legs:
+            sys.exit(f"{d} was prepared with other legs ({prepared and prepared.group(1)}, not {legs}): "
+                     "give --work a directory of its own")
         return d
     (d / "sim").mkdir(parents=True, exist_ok=True)
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "check": True}
-    subprocess.run([starc, "gen", "--seed", str(seed), "--out", d / "scenario.toml"], **quiet)
+    subprocess.run([starc, "gen", "--seed", str(seed), "--out", scenario], **quiet)
     if legs:
-        scenario = d / "scenario.toml"
         text = scenario.read_text()
         if "\n[responder]\n" not in text:
             sys.exit(f"{scenario}: no [responder] table to set legs in")
         scenario.write_text(text.replace("\n[responder]\n", f'\n[responder]\nlegs = "{legs}"\n', 1))
-    subprocess.run([starc, "sim", d / "scenario.toml", "--sensors-only", "--no-camera", "--seed", str(seed),
+    subprocess.run([starc, "sim", scenario, "--sensors-only", "--no-camera", "--seed", str(seed),
                     "--out", d / "sim"], **quiet)
     split_pcap(d / "sim/avia.pcap", {s["ip"]: d / f"{side}.pcap.part" for side, s in SIDES.items()})
     for side in SIDES:
         (d / f"{side}.pcap.part").rename(d / f"{side}.pcap")
     for bulky in ["avia.pcap", "labels_robot.bin", "labels_fpv.bin"]:
         (d / "sim" / bulky).unlink(missing_ok=True)
-    (d / "base.toml").write_text(base_toml(d / "scenario.toml")[0])
+    (d / "base.toml").write_text(base_toml(scenario)[0])
     return d
 
 
@@ -143,7 +148,7 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--responder-legs", choices=["min_jerk", "walk"],
                     help="how the responder's legs speed up (scenario [responder] legs; default: the "
-                         "generator's); use a --work of its own, buildings are prepared once")
+                         "generator's); buildings are prepared once, so give it a --work of its own")
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
     if any(s < 1000 for s in seeds) and not a.dev:

@@ -35,13 +35,9 @@ fn min_jerk_rate(tau: f64) -> f64 {
     30.0 * t * t * (1.0 - t) * (1.0 - t)
 }
 
-/// Velocity along a walking ramp (0..1 of the cruising speed) at normalised time `tau` (0..1):
-/// the minimum-jerk profile's position, so that the acceleration starts and ends at zero.
-fn ramp_speed(tau: f64) -> f64 {
-    min_jerk(tau)
-}
-
-/// Distance along a walking ramp, in units of cruising speed times ramp time (0..0.5).
+/// Distance along a walking ramp, in units of cruising speed times ramp time (0..0.5): the
+/// integral of [`min_jerk`], which is the ramp's speed (0..1 of the cruising speed), so that the
+/// acceleration starts and ends at zero.
 fn ramp_distance(tau: f64) -> f64 {
     let t = tau.clamp(0.0, 1.0);
     t * t * t * t * (2.5 - 3.0 * t + t * t)
@@ -80,19 +76,19 @@ impl Leg {
     fn progress(&self, t: f64, d: f64) -> (f64, f64) {
         let dur = self.t1 - self.t0;
         match self.walk {
-            Some((cruise, ramp)) if d > 0.0 => {
-                let up = cruise * ramp * ramp_distance(t / ramp);
+            // Only legs that move walk (`Route::with_profile`): d > 0.
+            Some((cruise, ramp)) => {
                 let (s, v) = if t < ramp {
-                    (up, cruise * ramp_speed(t / ramp))
+                    (cruise * ramp * ramp_distance(t / ramp), cruise * min_jerk(t / ramp))
                 } else if t <= dur - ramp {
                     (cruise * ramp * 0.5 + cruise * (t - ramp), cruise)
                 } else {
                     let left = dur - t;
-                    (d - cruise * ramp * ramp_distance(left / ramp), cruise * ramp_speed(left / ramp))
+                    (d - cruise * ramp * ramp_distance(left / ramp), cruise * min_jerk(left / ramp))
                 };
                 ((s / d).clamp(0.0, 1.0), v)
             }
-            _ => {
+            None => {
                 let tau = t / dur;
                 (min_jerk(tau), d * min_jerk_rate(tau) / dur)
             }
