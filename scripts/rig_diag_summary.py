@@ -46,8 +46,8 @@ def read(path):
     """Per search: the truth attempt right?, the search's outcome, and the judged attempts."""
     searches, judged, cur = [], [], None
     for line in open(path):
-        if SEARCH.match(line):
-            searches.append({'truth_right': False, 'outcome': None})
+        if (m := SEARCH.match(line)):
+            searches.append({'t': float(m[1]), 'truth_right': False, 'outcome': None})
         elif (m := ATTEMPT.match(line)):
             cur = {'kind': kind(float(m[1]), float(m[2])), 'here': None, 'rivals': []}
         elif (m := HERE.match(line)) and cur is not None:
@@ -59,6 +59,7 @@ def read(path):
             settled = kind(float(m[1]), float(m[2]))
             searches[-1]['truth_right'] = m[3] == 'true' and settled == 'right'
             searches[-1]['truth_settle'] = 'A' if searches[-1]['truth_right'] else SETTLE_CHAR[settled]
+            searches[-1]['truth_accepted'] = m[3] == 'true'
         elif (m := SUMMARY.match(line)) and searches and m[1] == 'true':
             searches[-1]['outcome'] = kind(float(m[2]), float(m[3]))
     return searches, judged
@@ -69,10 +70,13 @@ def main():
     ap.add_argument('--rivals', nargs=2, type=float, metavar=('K', 'M'))
     ap.add_argument('--timeline', action='store_true')
     ap.add_argument('--settle', type=int, metavar='N')
+    ap.add_argument('--within', type=float, metavar='S')
     ap.add_argument('outputs', nargs='+')
     a = ap.parse_args()
     if a.settle:
         return settle(a.settle, a.outputs)
+    if a.within:
+        return within(a.within, a.outputs)
     total = collections.Counter()
     for path in a.outputs:
         searches, judged = read(path)
@@ -110,6 +114,28 @@ def settle(first, outputs):
     for name, c in sorted(families.items()):
         print(f"{name:10s} buildings {c['buildings']:2d}: A {c['A']:3d} s {c['s']:3d} n {c['n']:3d} x {c['x']:3d}"
               f"  buildings mostly near {c['mostly near']}")
+
+
+def within(seconds, outputs):
+    """The attempt from the truth and the search, over each rig's searches up to `seconds`."""
+    families = collections.defaultdict(collections.Counter)
+    for path in outputs:
+        searches, _ = read(path)
+        name = path.rsplit('/', 1)[-1].rsplit('.', 1)[0]
+        family = families[name.split('-')[0]]
+        for s in (s for s in searches if s['t'] <= seconds and 'truth_settle' in s):
+            ends = s['truth_settle']
+            family[ends.upper() if ends in 'nx' and s['truth_accepted'] else ends] += 1
+            family[{None: 'refused', 'right': 'search right'}.get(s['outcome'], 'search wrong')] += 1
+    total = collections.Counter()
+    print(f'searches in the first {seconds:g} s; the attempt from the truth: accepted right A, right but refused s, '
+          'accepted off N, near refused n, far refused x')
+    for name, c in sorted(families.items()) + [('all', total)]:
+        if name != 'all':
+            total.update(c)
+        truth = '  '.join(f'{k} {c[k] + (c["X"] if k == "N" else 0):3d}' for k in 'AsNnx')
+        print(f"{name:10s} {truth}  | search right {c['search right']:3d} wrong {c['search wrong']:3d}"
+              f" refused {c['refused']:3d}")
 
 
 if __name__ == '__main__':

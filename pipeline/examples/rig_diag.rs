@@ -5,7 +5,9 @@
 //! single attempt from the true pose. Environment: `NO_HINT=1` (no start hint, as scored runs),
 //! `NEVER_APPLY=1` (every search a first alignment), `ALIGN_TOML=file` (the settings of the search
 //! and of the attempt from the truth),
-//! `DUMP_DIR=dir` (each search's window, map and truth for scripts/align_window_peers.py).
+//! `DUMP_DIR=dir` (each search's window, map and truth for scripts/align_window_peers.py),
+//! `STOP_AFTER_S=s` (end at the first search past s seconds of the rig). Many buildings at once:
+//! scripts/rig_diag_sweep.py.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
@@ -63,6 +65,8 @@ fn main() {
     let mut lio_t_world: Option<Isometry3<f64>> = None;
     let mut odom: Vec<(u64, Isometry3<f64>)> = Vec::new();
     let mut hint_set = false;
+    // The robot's LIO against the truth: now (m, deg) and the largest angle so far.
+    let mut robot_err = (0.0f64, 0.0f64, 0.0f64);
     for input in inputs {
         match input.unwrap() {
             MissionInput::Imu(Side::Robot, s) => rc.push_imu(s, &mut rsteps),
@@ -74,6 +78,11 @@ fn main() {
         for st in rsteps.drain(..) {
             if lio_t_world.is_none() {
                 lio_t_world = Some(st.output.lidar_pose * pose_at(&gt_robot, st.output.end_ns).unwrap().inverse());
+            }
+            if let (Some(l_t_w), Some(t)) = (lio_t_world, pose_at(&gt_robot, st.output.end_ns)) {
+                let e = (l_t_w * t).inverse() * st.output.lidar_pose;
+                let deg = e.rotation.angle().to_degrees();
+                robot_err = (e.translation.vector.norm(), deg, robot_err.2.max(deg));
             }
         }
         for o in routs.drain(..) {
@@ -98,6 +107,10 @@ fn main() {
             let end = job.end_ns;
             let truth = l_t_w * pose_at(&gt_fpv, end).unwrap();
             let t_s = (end - first) as f64 * 1e-9;
+            // STOP_AFTER_S=s: end the run at the first search past s seconds of the rig.
+            if std::env::var("STOP_AFTER_S").is_ok_and(|v| t_s > v.parse::<f64>().unwrap()) {
+                return;
+            }
             let truth_job = job.clone();
             // DUMP_DIR=dir: each search's inputs for the peers (scripts/align_window_peers.py):
             // the window in its frame, the robot's map, the true pose of the frame.
@@ -127,6 +140,18 @@ fn main() {
             let o_first = odom.first().map(|p| p.1).unwrap();
             let o_end = odom.iter().rev().find(|p| p.0 <= end).map(|p| p.1).unwrap();
             let start_of = |w: &Isometry3<f64>| w * o_end.inverse() * o_first;
+            // How far the rig's LIO has drifted since its first scan (what a window that
+            // starts there carries into the fit), against the truth's own motion.
+            let t_first = l_t_w * pose_at(&gt_fpv, odom.first().map_or(end, |p| p.0)).unwrap();
+            let drift = (t_first.inverse() * truth).inverse() * (o_first.inverse() * o_end);
+            println!(
+                "  lio drift since first: {:.3} m {:.2} deg; robot now {:.3} m {:.2} deg (at most {:.2} deg)",
+                drift.translation.vector.norm(),
+                drift.rotation.angle().to_degrees(),
+                robot_err.0,
+                robot_err.1,
+                robot_err.2
+            );
             let hint = core.start_hint().copied().unwrap_or_else(Isometry3::identity);
             let true_xy = truth.translation.vector;
             println!(
