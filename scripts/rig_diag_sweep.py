@@ -63,6 +63,8 @@ def prepare(building):
     diag.mkdir(exist_ok=True)
     for f in (building / "sim").iterdir():
         link = diag / f.name
+        if link.is_symlink() and not link.exists():
+            link.unlink()  # the building was prepared again elsewhere
         if not link.exists():
             link.symlink_to(f.resolve())
     if not (diag / "avia.pcap").exists():
