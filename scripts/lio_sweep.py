@@ -31,7 +31,6 @@ import argparse
 import json
 import re
 import statistics
-import struct
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -42,6 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from odometry_peers import SIDES, base_toml, parse_seeds  # noqa: E402
+from pcap_records import read_pcap  # noqa: E402
 
 
 def split_pcap(src, dsts):
@@ -49,17 +49,13 @@ def split_pcap(src, dsts):
     by_ip = {bytes(int(x) for x in ip.split(".")): dst for ip, dst in dsts.items()}
     outs = {ip: open(dst, "wb") for ip, dst in by_ip.items()}
     try:
-        with open(src, "rb") as f:
-            header = f.read(24)
-            for o in outs.values():
-                o.write(header)
-            order = "<" if struct.unpack("<I", header[:4])[0] in (0xA1B2C3D4, 0xA1B23C4D) else ">"
-            while len(rec := f.read(16)) == 16:
-                incl = struct.unpack(order + "IIII", rec)[2]
-                data = f.read(incl)
-                if len(data) >= 34 and (o := outs.get(data[26:30])):
-                    o.write(rec)
-                    o.write(data)
+        header, records = read_pcap(src)
+        for o in outs.values():
+            o.write(header)
+        for _, rec, data in records:
+            if len(data) >= 34 and (o := outs.get(data[26:30])):
+                o.write(rec)
+                o.write(data)
     finally:
         for o in outs.values():
             o.close()

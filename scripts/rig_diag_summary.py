@@ -125,7 +125,7 @@ def within(seconds, outputs):
         family = families[name.split('-')[0]]
         for s in (s for s in searches if s['t'] <= seconds and 'truth_settle' in s):
             ends = s['truth_settle']
-            family[ends.upper() if ends in 'nx' and s['truth_accepted'] else ends] += 1
+            family['N' if ends in 'nx' and s['truth_accepted'] else ends] += 1
             family[{None: 'refused', 'right': 'search right'}.get(s['outcome'], 'search wrong')] += 1
     total = collections.Counter()
     print(f'searches in the first {seconds:g} s; the attempt from the truth: accepted right A, right but refused s, '
@@ -133,7 +133,7 @@ def within(seconds, outputs):
     for name, c in sorted(families.items()) + [('all', total)]:
         if name != 'all':
             total.update(c)
-        truth = '  '.join(f'{k} {c[k] + (c["X"] if k == "N" else 0):3d}' for k in 'AsNnx')
+        truth = '  '.join(f'{k} {c[k]:3d}' for k in 'AsNnx')
         print(f"{name:10s} {truth}  | search right {c['search right']:3d} wrong {c['search wrong']:3d}"
               f" refused {c['refused']:3d}")
 

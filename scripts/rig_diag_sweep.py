@@ -21,7 +21,6 @@ OUT/*.txt`. Seeds 1000 and up are the test set (report only); seeds under 1000 n
 import argparse
 import heapq
 import os
-import struct
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -30,28 +29,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from odometry_peers import parse_seeds  # noqa: E402
-
-
-def records(path):
-    """Classic-pcap records as ((seconds, sub-seconds), header and data), in file order."""
-    with open(path, "rb") as f:
-        header = f.read(24)
-        order = "<" if struct.unpack("<I", header[:4])[0] in (0xA1B2C3D4, 0xA1B23C4D) else ">"
-        while len(rec := f.read(16)) == 16:
-            sec, sub, incl, _ = struct.unpack(order + "IIII", rec)
-            yield (sec, sub), rec + f.read(incl)
+from pcap_records import read_pcap  # noqa: E402
 
 
 def merge_pcaps(out, first, second):
     """One capture of both files' records by time stamp (both written by one simulation, so
     they share a header)."""
-    with open(first, "rb") as f:
-        header = f.read(24)
+    header, a = read_pcap(first)
+    _, b = read_pcap(second)
     tmp = out.with_suffix(".part")
     with open(tmp, "wb") as w:
         w.write(header)
-        for _, rec in heapq.merge(records(first), records(second), key=lambda r: r[0]):
+        for _, rec, data in heapq.merge(a, b, key=lambda r: r[0]):
             w.write(rec)
+            w.write(data)
     tmp.rename(out)
 
 

@@ -65,8 +65,8 @@ fn main() {
     let mut lio_t_world: Option<Isometry3<f64>> = None;
     let mut odom: Vec<(u64, Isometry3<f64>)> = Vec::new();
     let mut hint_set = false;
-    // The robot's LIO against the truth: now (m, deg) and the largest angle so far.
-    let mut robot_err = (0.0f64, 0.0f64, 0.0f64);
+    // The robot's LIO against the truth now (m, deg), and its largest angle so far.
+    let (mut robot_err, mut robot_max_deg) = ((0.0, 0.0), 0.0f64);
     for input in inputs {
         match input.unwrap() {
             MissionInput::Imu(Side::Robot, s) => rc.push_imu(s, &mut rsteps),
@@ -80,9 +80,8 @@ fn main() {
                 lio_t_world = Some(st.output.lidar_pose * pose_at(&gt_robot, st.output.end_ns).unwrap().inverse());
             }
             if let (Some(l_t_w), Some(t)) = (lio_t_world, pose_at(&gt_robot, st.output.end_ns)) {
-                let e = (l_t_w * t).inverse() * st.output.lidar_pose;
-                let deg = e.rotation.angle().to_degrees();
-                robot_err = (e.translation.vector.norm(), deg, robot_err.2.max(deg));
+                robot_err = pose_error(&(l_t_w * t), &st.output.lidar_pose);
+                robot_max_deg = robot_max_deg.max(robot_err.1);
             }
         }
         for o in routs.drain(..) {
@@ -143,14 +142,10 @@ fn main() {
             // How far the rig's LIO has drifted since its first scan (what a window that
             // starts there carries into the fit), against the truth's own motion.
             let t_first = l_t_w * pose_at(&gt_fpv, odom.first().map_or(end, |p| p.0)).unwrap();
-            let drift = (t_first.inverse() * truth).inverse() * (o_first.inverse() * o_end);
+            let (drift_m, drift_deg) = pose_error(&(t_first.inverse() * truth), &(o_first.inverse() * o_end));
             println!(
-                "  lio drift since first: {:.3} m {:.2} deg; robot now {:.3} m {:.2} deg (at most {:.2} deg)",
-                drift.translation.vector.norm(),
-                drift.rotation.angle().to_degrees(),
-                robot_err.0,
-                robot_err.1,
-                robot_err.2
+                "  lio drift since first: {drift_m:.3} m {drift_deg:.2} deg; robot now {:.3} m {:.2} deg (at most {robot_max_deg:.2} deg)",
+                robot_err.0, robot_err.1
             );
             let hint = core.start_hint().copied().unwrap_or_else(Isometry3::identity);
             let true_xy = truth.translation.vector;
